@@ -1,0 +1,69 @@
+"""The ``sixdpose`` console script. Each stage adds its subcommands through a ``register`` function.
+
+Errors a user can fix (bad arguments, missing files) are reported as one line on stderr with exit
+status 2; nothing is written in that case.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+#: Modules that contribute subcommands, each with ``register(subparsers) -> None``; every parser it
+#: adds sets ``func`` (called with the parsed namespace, returns an exit status or None).
+COMMAND_MODULES = (
+    "sixdpose.assets.cli",
+    "sixdpose.generation.cli",
+    "sixdpose.datasets.cli",
+    "sixdpose.segmentation.cli",
+    "sixdpose.registration.cli",
+    "sixdpose.evaluation.cli",
+    "sixdpose.pose.cli",
+)
+
+
+class UserError(Exception):
+    """An error caused by the user's input; printed as one line, exit status 2."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Build the argument parser with every available stage's subcommands."""
+    from . import __version__
+
+    parser = argparse.ArgumentParser(prog="sixdpose", description="6D pose estimation from RGB-D (paper companion)")
+    parser.add_argument("--version", action="version", version=f"sixdpose {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        try:
+            mod = importlib.import_module(name)
+        except ModuleNotFoundError as e:
+            if e.name == name:  # stage not present in this build
+                continue
+            raise
+        mod.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point: parse ``argv`` and run the chosen subcommand; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    from .datasets.base import DatasetError
+
+    try:
+        rc = args.func(args)
+    except (UserError, DatasetError, FileNotFoundError, NotADirectoryError, PermissionError) as e:
+        print(f"sixdpose {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"sixdpose {args.command}: interrupted", file=sys.stderr)
+        return 130
+    return int(rc or 0)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

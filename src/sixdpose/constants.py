@@ -1,0 +1,55 @@
+"""Constants fixed by the paper (section III-B and III-C)."""
+
+from __future__ import annotations
+
+#: The 18 target objects, in the order of the merged-mask codes of section III-C.
+#: The object id of a target (``obj_id``) is its 1-based position in this list.
+TARGET_OBJECTS: tuple[str, ...] = (
+    "055_baseball",
+    "056_tennis_ball",
+    "072-a_toy_airplane",
+    "019_pitcher_base",
+    "040_large_marker",
+    "021_bleach_cleanser",
+    "077_rubiks_cube",
+    "048_hammer",
+    "008_pudding_box",
+    "053_mini_soccer_ball",
+    "011_banana",
+    "006_mustard_bottle",
+    "013_apple",
+    "029_plate",
+    "035_power_drill",
+    "043_phillips_screwdriver",
+    "032_knife",
+    "042_adjustable_wrench",
+)
+
+#: Merged-mask code of each target: pixel value = code - instance number (section III-C).
+MERGED_MASK_CODES: dict[str, int] = dict(
+    zip(TARGET_OBJECTS, (14, 28, 42, 56, 70, 85, 99, 113, 127, 141, 155, 170, 184, 198, 212, 226, 240, 255))
+)
+
+#: Objects the paper treats as symmetric (marked * in section III-B).
+SYMMETRIC_OBJECTS: frozenset[str] = frozenset(
+    {"056_tennis_ball", "053_mini_soccer_ball", "013_apple", "029_plate"}
+)
+
+#: At most this many instances of one object per scene (section III-C).
+MAX_INSTANCES_PER_OBJECT = 4
+
+#: Attribution required by the YCB models' CC BY 4.0 licence.
+YCB_ATTRIBUTION = (
+    'Object models: "The YCB Object and Model Set" (Calli, Walsman, Singh, Srinivasa, Abbeel, Dollar; '
+    "2015), http://ycb-benchmarks.s3-website-us-east-1.amazonaws.com/, licensed under Creative Commons "
+    "Attribution 4.0 International (CC BY 4.0). This dataset contains renderings of these models and "
+    "point clouds sampled from them."
+)
+
+
+def obj_id_of(name: str) -> int:
+    """Return the 1-based object id of target ``name`` (paper order); raise ``KeyError`` otherwise."""
+    try:
+        return TARGET_OBJECTS.index(name) + 1
+    except ValueError:
+        raise KeyError(f"{name!r} is not one of the 18 target objects") from None
