@@ -27,13 +27,20 @@ class UserError(Exception):
     """An error caused by the user's input; printed as one line, exit status 2."""
 
 
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose usage errors are one line (``prog: error: ...``), exit status 2."""
+
+    def error(self, message):  # noqa: D102
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser with every available stage's subcommands."""
     from . import __version__
 
-    parser = argparse.ArgumentParser(prog="sixdpose", description="6D pose estimation from RGB-D (paper companion)")
+    parser = _Parser(prog="sixdpose", description="6D pose estimation from RGB-D (paper companion)")
     parser.add_argument("--version", action="version", version=f"sixdpose {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name in COMMAND_MODULES:
         try:
             mod = importlib.import_module(name)
@@ -66,4 +73,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    # run through the package module so exception classes are the ones subcommands raise
+    from sixdpose.cli import main as _main
+
+    sys.exit(_main())

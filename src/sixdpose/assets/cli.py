@@ -1,0 +1,31 @@
+"""``sixdpose fetch-ycb``: command line of the asset stage."""
+
+from __future__ import annotations
+
+
+def register(sub) -> None:
+    """Add the ``fetch-ycb`` subcommand."""
+    from .fetch import DEFAULT_BASE_URL
+
+    p = sub.add_parser("fetch-ycb", help="download the official YCB google_16k models",
+                       description="Download <name>_google_16k.tgz per object into DIR (official layout) "
+                       "and write DIR/objects.csv. Needs internet access.")
+    p.add_argument("--to", required=True, help="destination asset directory")
+    p.add_argument("--objects", nargs="+", default=None, help="object names (default: all 46)")
+    p.add_argument("--base-url", default=DEFAULT_BASE_URL, help="archive location (default: the official YCB site)")
+    p.add_argument("--overwrite", action="store_true", help="download again objects already present")
+    p.add_argument("--timeout", type=float, default=60.0, help="network timeout in seconds")
+    p.set_defaults(func=_run)
+
+
+def _run(args) -> int:
+    from ..cli import UserError
+    from .fetch import fetch_ycb
+    from .ycb import AssetError
+
+    try:
+        got = fetch_ycb(args.to, args.objects, base_url=args.base_url, timeout=args.timeout, overwrite=args.overwrite)
+    except AssetError as e:
+        raise UserError(str(e)) from None
+    print(f"fetched {len(got)} object(s) into {args.to}")
+    return 0

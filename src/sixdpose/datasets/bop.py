@@ -1,0 +1,418 @@
+"""BOP datasets (https://bop.felk.cvut.cz/datasets/) behind the :mod:`.base` reader interface,
+and the export of a synthetic dataset to the BOP layout (``sixdpose export-bop``).
+
+BOP layout of a dataset root ``B``::
+
+    B/models/obj_NNNNNN.ply          mesh in millimetres (vertex normals / colours optional)
+    B/models/models_info.json        per obj_id: diameter (mm), bounding box, symmetries_discrete /
+                                     symmetries_continuous (an object with either is *symmetric*)
+    B/<split>/<scene:06d>/scene_gt.json       per im_id: list of {cam_R_m2c, cam_t_m2c (mm), obj_id}
+    B/<split>/<scene:06d>/scene_camera.json   per im_id: cam_K, depth_scale (depth unit in mm)
+    B/<split>/<scene:06d>/scene_gt_info.json  per im_id: list of {px_count_visib, ...} (optional)
+    B/<split>/<scene:06d>/rgb/<im:06d>.png    (or .jpg)
+    B/<split>/<scene:06d>/depth/<im:06d>.png  16-bit depth, value * depth_scale = mm (optional)
+    B/<split>/<scene:06d>/mask_visib/<im:06d>_<gt:06d>.png  visible masks (optional)
+
+Everything is converted to metres on read. A split without ``depth/`` gives ``Sample.depth=None``;
+without ``mask_visib/`` every ``Instance.mask`` is ``None`` (see :attr:`BopDataset.has_depth` and
+:attr:`BopDataset.has_masks`).
+
+Two optional keys, ignored by the bop_toolkit, make the export of a synthetic dataset round-trip
+exactly: ``obj_name`` in ``models_info.json`` and ``inst`` (instance number of the object in its
+scene) in each ``scene_gt.json`` entry.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from .base import DatasetError, Instance, ObjectModel, Sample
+
+log = logging.getLogger(__name__)
+
+_RGB_EXTS = (".png", ".jpg", ".jpeg", ".tif")
+
+
+def load_json(path: Path):
+    """Load a JSON file, raising :class:`DatasetError` naming the file if missing or corrupt."""
+    path = Path(path)
+    if not path.is_file():
+        raise DatasetError(f"{path}: file not found")
+    try:
+        return json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise DatasetError(f"{path}: corrupt JSON ({e})") from None
+
+
+def _read_image(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            return np.asarray(im).copy()
+    except FileNotFoundError:
+        raise DatasetError(f"{path}: file not found") from None
+    except Exception as e:  # PIL raises several types for truncated / non-image files
+        raise DatasetError(f"{path}: unreadable image ({e})") from None
+
+
+def _is_symmetric(info: dict) -> bool:
+    return bool(info.get("symmetries_discrete")) or bool(info.get("symmetries_continuous"))
+
+
+class BopDataset:
+    """One split of a BOP dataset as a sequence of :class:`Sample` (metres, ``X_CO`` poses).
+
+    Args:
+        root: BOP dataset root (contains ``models/models_info.json`` and the split folder).
+        split: split folder name, e.g. ``"test"``, ``"train_real"``.
+        scene_ids: optional subset of scene ids (default: every scene folder of the split).
+        load_masks: read ``mask_visib`` PNGs when the split has them (default True).
+        models_dir: models folder name (``"models"``; ``"models_eval"`` for the BOP eval models).
+        symmetric_ids: optional override of the set of symmetric object ids (e.g. for a dataset
+            distributed without symmetry annotations); default: from ``models_info.json``.
+        targets: optional list of ``(scene_id, im_id)`` to restrict the images to.
+    """
+
+    def __init__(
+        self,
+        root: str | Path,
+        split: str = "test",
+        scene_ids=None,
+        load_masks: bool = True,
+        models_dir: str = "models",
+        symmetric_ids=None,
+        targets=None,
+    ):
+        self.root = Path(root)
+        self.split = split
+        self.models_path = self.root / models_dir
+        info_path = self.models_path / "models_info.json"
+        info = load_json(info_path)
+        if not isinstance(info, dict):
+            raise DatasetError(f"{info_path}: expected a mapping obj_id -> info")
+        try:
+            self.models_info: dict[int, dict] = {int(k): v for k, v in info.items()}
+        except ValueError as e:
+            raise DatasetError(f"{info_path}: keys must be integer object ids ({e})") from None
+        for oid, v in self.models_info.items():
+            if not isinstance(v, dict) or "diameter" not in v:
+                raise DatasetError(f"{info_path}: object {oid}: missing field 'diameter'")
+        self.symmetric_ids = None if symmetric_ids is None else {int(i) for i in symmetric_ids}
+        split_dir = self.root / split
+        if not split_dir.is_dir():
+            avail = sorted(p.name for p in self.root.iterdir() if p.is_dir() and p.name != models_dir)
+            raise DatasetError(f"{split_dir}: split {split!r} not found (available: {', '.join(avail) or 'none'})")
+        self.split_dir = split_dir
+        dirs = sorted(p for p in split_dir.iterdir() if p.is_dir() and p.name.isdigit())
+        if scene_ids is not None:
+            wanted = {int(s) for s in scene_ids}
+            dirs = [p for p in dirs if int(p.name) in wanted]
+        if not dirs:
+            raise DatasetError(f"{split_dir}: no scene folders")
+        self.load_masks = load_masks
+        self._scene_dirs: dict[int, Path] = {int(p.name): p for p in dirs}
+        self._gt: dict[int, dict[int, list]] = {}
+        self._cam: dict[int, dict[int, dict]] = {}
+        self._gt_info: dict[int, dict[int, list] | None] = {}
+        self._keys: list[tuple[int, int]] = []
+        for sid, d in self._scene_dirs.items():
+            gt = load_json(d / "scene_gt.json")
+            cam = load_json(d / "scene_camera.json")
+            gi = load_json(d / "scene_gt_info.json") if (d / "scene_gt_info.json").is_file() else None
+            self._gt[sid] = {int(k): v for k, v in gt.items()}
+            self._cam[sid] = {int(k): v for k, v in cam.items()}
+            self._gt_info[sid] = None if gi is None else {int(k): v for k, v in gi.items()}
+            for im in sorted(self._gt[sid]):
+                if im not in self._cam[sid]:
+                    raise DatasetError(f"{d / 'scene_camera.json'}: no entry for image {im}")
+                self._keys.append((sid, im))
+        if targets is not None:
+            tset = {(int(s), int(i)) for s, i in targets}
+            self._keys = [k for k in self._keys if k in tset]
+        self.has_depth = all((d / "depth").is_dir() for d in self._scene_dirs.values())
+        self.has_masks = all((d / "mask_visib").is_dir() for d in self._scene_dirs.values())
+        if not self.has_depth:
+            log.info("%s: split %r has no depth images; Sample.depth will be None", self.root, split)
+        if not self.has_masks:
+            log.info("%s: split %r has no mask_visib; Instance.mask will be None", self.root, split)
+        self._models: dict[int, ObjectModel] = {}
+        self._meshes: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    # -- torch Dataset protocol -------------------------------------------------------------
+    def __len__(self) -> int:
+        return len(self._keys)
+
+    def __getitem__(self, index: int) -> Sample:
+        return self.load_key(*self._keys[index])
+
+    def keys(self) -> list[tuple[int, int]]:
+        """``(scene_id, im_id)`` of every image, in order."""
+        return list(self._keys)
+
+    # -- reading ----------------------------------------------------------------------------
+    def _rgb_path(self, sid: int, im: int) -> Path:
+        d = self._scene_dirs[sid]
+        for sub in ("rgb", "gray"):
+            for ext in _RGB_EXTS:
+                p = d / sub / f"{im:06d}{ext}"
+                if p.is_file():
+                    return p
+        raise DatasetError(f"{d / 'rgb' / f'{im:06d}.png'}: file not found")
+
+    def load_key(self, scene_id: int, im_id: int, with_masks: bool | None = None) -> Sample:
+        """Read image ``im_id`` of scene ``scene_id``: RGB, depth (metres or None), K, instances."""
+        scene_id, im_id = int(scene_id), int(im_id)
+        if scene_id not in self._scene_dirs:
+            raise DatasetError(f"{self.split_dir}: no scene {scene_id}")
+        d = self._scene_dirs[scene_id]
+        if im_id not in self._gt[scene_id]:
+            raise DatasetError(f"{d / 'scene_gt.json'}: no image {im_id}")
+        rgb = _read_image(self._rgb_path(scene_id, im_id))
+        if rgb.ndim == 2:
+            rgb = np.repeat(rgb[..., None], 3, axis=2)
+        rgb = rgb[..., :3].astype(np.uint8, copy=False)
+        cam = self._cam[scene_id][im_id]
+        try:
+            K = np.asarray(cam["cam_K"], dtype=np.float64).reshape(3, 3)
+        except (KeyError, ValueError, TypeError) as e:
+            raise DatasetError(f"{d / 'scene_camera.json'}: image {im_id}: bad cam_K ({e})") from None
+        depth = None
+        dpath = d / "depth" / f"{im_id:06d}.png"
+        if (d / "depth").is_dir():
+            raw = _read_image(dpath)
+            if raw.ndim != 2:
+                raise DatasetError(f"{dpath}: expected a single-channel 16-bit depth image")
+            if raw.shape != rgb.shape[:2]:
+                raise DatasetError(f"{dpath}: shape {raw.shape} does not match the RGB image {rgb.shape[:2]}")
+            scale = float(cam.get("depth_scale", 1.0))
+            depth = (raw.astype(np.float32) * np.float32(scale / 1000.0)).astype(np.float32)
+        masks = (self.load_masks if with_masks is None else with_masks) and (d / "mask_visib").is_dir()
+        gts = self._gt[scene_id][im_id]
+        infos = (self._gt_info[scene_id] or {}).get(im_id)
+        insts = []
+        seen: dict[int, int] = {}
+        for k, g in enumerate(gts):
+            try:
+                oid = int(g["obj_id"])
+                R = np.asarray(g["cam_R_m2c"], dtype=np.float64).reshape(3, 3)
+                t = np.asarray(g["cam_t_m2c"], dtype=np.float64).reshape(3) / 1000.0
+            except (KeyError, ValueError, TypeError) as e:
+                raise DatasetError(f"{d / 'scene_gt.json'}: image {im_id} gt {k}: bad field ({e})") from None
+            inst = int(g.get("inst", seen.get(oid, 0)))
+            seen[oid] = seen.get(oid, 0) + 1
+            px = -1
+            if infos is not None and k < len(infos) and "px_count_visib" in infos[k]:
+                px = int(infos[k]["px_count_visib"])
+            mask = None
+            if masks:
+                m = _read_image(d / "mask_visib" / f"{im_id:06d}_{k:06d}.png")
+                mask = (m if m.ndim == 2 else m[..., 0]) > 0
+                if px < 0:
+                    px = int(mask.sum())
+            name = str(self.models_info.get(oid, {}).get("obj_name", f"obj_{oid:06d}"))
+            insts.append(Instance(name, oid, inst, R, t, mask, px))
+        return Sample(scene_id, im_id, rgb, depth, K, insts)
+
+    # -- models -----------------------------------------------------------------------------
+    @property
+    def object_ids(self) -> dict[int, str]:
+        """Map obj_id -> object name (``obj_NNNNNN`` unless ``models_info.json`` has ``obj_name``)."""
+        return {oid: str(v.get("obj_name", f"obj_{oid:06d}")) for oid, v in sorted(self.models_info.items())}
+
+    def is_symmetric(self, obj_id: int) -> bool:
+        """Whether ADD-S applies to ``obj_id`` (symmetry annotations, or the ``symmetric_ids`` override)."""
+        if self.symmetric_ids is not None:
+            return int(obj_id) in self.symmetric_ids
+        return _is_symmetric(self.models_info.get(int(obj_id), {}))
+
+    def _model_path(self, obj_id: int) -> Path:
+        return self.models_path / f"obj_{obj_id:06d}.ply"
+
+    def model_mesh(self, obj_id: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(vertices (V, 3) float64 metres, triangles (F, 3) int)`` of the model, or ``None`` if the
+        PLY has no faces. Used to sample a uniform reference surface for registration."""
+        obj_id = int(obj_id)
+        if obj_id not in self._meshes:
+            self.model(obj_id)
+        return self._meshes.get(obj_id)
+
+    def model(self, obj_id: int) -> ObjectModel:
+        """Reference model of ``obj_id`` (vertices in metres, normals, colours), cached.
+
+        Normals are the PLY's vertex normals, else computed from the mesh faces.
+        """
+        import open3d as o3d
+
+        obj_id = int(obj_id)
+        if obj_id in self._models:
+            return self._models[obj_id]
+        if obj_id not in self.models_info:
+            raise DatasetError(f"{self.models_path / 'models_info.json'}: no object with obj_id {obj_id}")
+        path = self._model_path(obj_id)
+        if not path.is_file():
+            raise DatasetError(f"{path}: model file not found")
+        mesh = o3d.io.read_triangle_mesh(str(path))
+        if len(mesh.vertices) == 0:
+            raise DatasetError(f"{path}: no vertices could be read")
+        pts = np.asarray(mesh.vertices, dtype=np.float64) / 1000.0
+        tris = np.asarray(mesh.triangles, dtype=np.int64)
+        if len(tris):
+            self._meshes[obj_id] = (pts, tris)
+        if mesh.has_vertex_normals():
+            nrm = np.asarray(mesh.vertex_normals, dtype=np.float64)
+        elif len(tris):
+            mesh.compute_vertex_normals()
+            nrm = np.asarray(mesh.vertex_normals, dtype=np.float64)
+        else:
+            nrm = None
+        if nrm is not None:
+            nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
+        col = np.asarray(mesh.vertex_colors, dtype=np.float64) if mesh.has_vertex_colors() else None
+        info = self.models_info[obj_id]
+        m = ObjectModel(
+            self.object_ids[obj_id], obj_id, pts, nrm, col, float(info["diameter"]) / 1000.0, self.is_symmetric(obj_id)
+        )
+        self._models[obj_id] = m
+        return m
+
+
+# ------------------------------------------------------------------------------------------
+# export of any reader (synthetic layout) to BOP
+# ------------------------------------------------------------------------------------------
+def _symmetry_axis(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Estimate the axis of a continuous symmetry: the principal axis whose variance differs most
+    from the other two (plate: its normal; sphere: arbitrary). Returns (axis (3,), centre (3,))."""
+    c = points.mean(axis=0)
+    w, v = np.linalg.eigh(np.cov((points - c).T))
+    d = [abs(w[i] - np.mean(np.delete(w, i))) for i in range(3)]
+    return v[:, int(np.argmax(d))], c
+
+
+def _write_ply(path: Path, pts_mm: np.ndarray, nrm: np.ndarray | None, col: np.ndarray | None) -> None:
+    """Write a binary little-endian PLY point cloud (x y z [nx ny nz] [red green blue])."""
+    n = len(pts_mm)
+    fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
+    if nrm is not None:
+        fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
+    if col is not None:
+        fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
+    arr = np.empty(n, dtype=fields)
+    arr["x"], arr["y"], arr["z"] = pts_mm.T
+    if nrm is not None:
+        arr["nx"], arr["ny"], arr["nz"] = nrm.T
+    if col is not None:
+        c8 = np.clip(np.round(col * 255.0), 0, 255).astype(np.uint8)
+        arr["red"], arr["green"], arr["blue"] = c8.T
+    types = {"<f4": "float", "u1": "uchar"}
+    header = ["ply", "format binary_little_endian 1.0", f"element vertex {n}"]
+    header += [f"property {types[t]} {name}" for name, t in fields]
+    header += ["end_header"]
+    with open(path, "wb") as f:
+        f.write(("\n".join(header) + "\n").encode("ascii"))
+        f.write(arr.tobytes())
+
+
+def export_bop(dataset, out: str | Path, split: str = "test", depth_scale: float = 0.1, progress: bool = True) -> Path:
+    """Write ``dataset`` (any reader of the :mod:`.base` interface) as a BOP dataset.
+
+    Args:
+        dataset: e.g. a :class:`~sixdpose.datasets.synthetic.SyntheticDataset`.
+        out: BOP root to create (must not already contain ``models/models_info.json``).
+        split: split folder name to write.
+        depth_scale: BOP depth unit in mm (0.1 -> 16-bit range up to 6.55 m, resolution 0.1 mm);
+            depths beyond the 16-bit range are written as 0 (no measurement) with a warning.
+        progress: show a tqdm bar.
+    Returns:
+        The output root. Models are written in mm with normals/colours; symmetric objects get a
+        ``symmetries_continuous`` entry whose axis is estimated from the model's principal axes
+        (the bop_toolkit uses it only for MSSD/MSPD; ADD-S needs just the flag).
+    Raises:
+        DatasetError: ``out`` already holds a BOP dataset.
+    """
+    from PIL import Image
+    from tqdm import tqdm
+
+    out = Path(out)
+    if (out / "models" / "models_info.json").exists():
+        raise DatasetError(f"{out}: already contains a BOP dataset (models/models_info.json); choose a new --out")
+    (out / "models").mkdir(parents=True, exist_ok=True)
+    info = {}
+    for oid, name in sorted(dataset.object_ids.items()):
+        m = dataset.model(oid)
+        mm = m.points * 1000.0
+        _write_ply(out / "models" / f"obj_{oid:06d}.ply", mm, m.normals, m.colors)
+        lo, hi = mm.min(axis=0), mm.max(axis=0)
+        e = {
+            "diameter": m.diameter * 1000.0,
+            "min_x": lo[0], "min_y": lo[1], "min_z": lo[2],
+            "size_x": hi[0] - lo[0], "size_y": hi[1] - lo[1], "size_z": hi[2] - lo[2],
+            "obj_name": name,
+        }
+        if m.symmetric:
+            axis, c = _symmetry_axis(mm)
+            e["symmetries_continuous"] = [{"axis": axis.tolist(), "offset": c.tolist()}]
+        info[str(oid)] = {k: (float(v) if isinstance(v, (np.floating, float)) else v) for k, v in e.items()}
+    (out / "models" / "models_info.json").write_text(json.dumps(info, indent=1))
+
+    scenes: dict[int, dict[str, dict]] = {}
+    cam_written = False
+    keys = dataset.keys()
+    n_clipped = 0
+    for index, (sid, im) in enumerate(tqdm(keys, desc="export-bop", disable=not progress, unit="img")):
+        s: Sample = dataset[index]
+        sd = out / split / f"{s.scene_id:06d}"
+        if s.scene_id not in scenes:
+            for sub in ("rgb", "depth", "mask_visib"):
+                (sd / sub).mkdir(parents=True, exist_ok=True)
+            scenes[s.scene_id] = {"gt": {}, "cam": {}, "info": {}}
+        h, w = s.rgb.shape[:2]
+        Image.fromarray(s.rgb).save(sd / "rgb" / f"{s.im_id:06d}.png")
+        if s.depth is not None:
+            raw = np.round(np.nan_to_num(s.depth, nan=0.0) * (1000.0 / depth_scale))
+            over = raw > 65535
+            n_clipped += int(over.sum())
+            raw[over | (raw < 0)] = 0
+            Image.fromarray(raw.astype(np.uint16)).save(sd / "depth" / f"{s.im_id:06d}.png")
+        gts, infos = [], []
+        for k, inst in enumerate(s.instances):
+            gts.append({
+                "cam_R_m2c": inst.R.reshape(-1).tolist(),
+                "cam_t_m2c": (inst.t * 1000.0).tolist(),
+                "obj_id": int(inst.obj_id),
+                "inst": int(inst.inst),
+            })
+            gi = {"px_count_visib": int(inst.px_visib)}
+            if inst.mask is not None:
+                Image.fromarray(inst.mask.astype(np.uint8) * 255).save(sd / "mask_visib" / f"{s.im_id:06d}_{k:06d}.png")
+                ys, xs = np.nonzero(inst.mask)
+                bb = [int(xs.min()), int(ys.min()), int(xs.max() - xs.min() + 1), int(ys.max() - ys.min() + 1)] if len(xs) else [-1, -1, -1, -1]
+                gi["bbox_visib"] = bb
+                if inst.px_visib < 0:
+                    gi["px_count_visib"] = int(inst.mask.sum())
+            infos.append(gi)
+        scenes[s.scene_id]["gt"][str(s.im_id)] = gts
+        scenes[s.scene_id]["cam"][str(s.im_id)] = {"cam_K": s.K.reshape(-1).tolist(), "depth_scale": depth_scale}
+        scenes[s.scene_id]["info"][str(s.im_id)] = infos
+        if not cam_written:
+            K = s.K
+            cam = {"cx": K[0, 2], "cy": K[1, 2], "fx": K[0, 0], "fy": K[1, 1], "width": w, "height": h, "depth_scale": depth_scale}
+            (out / "camera.json").write_text(json.dumps({k: float(v) if k not in ("width", "height") else int(v) for k, v in cam.items()}, indent=2))
+            cam_written = True
+    for sid, d in scenes.items():
+        sd = out / split / f"{sid:06d}"
+        (sd / "scene_gt.json").write_text(json.dumps(d["gt"], indent=1))
+        (sd / "scene_camera.json").write_text(json.dumps(d["cam"], indent=1))
+        (sd / "scene_gt_info.json").write_text(json.dumps(d["info"], indent=1))
+    if n_clipped:
+        log.warning("%d depth pixels beyond the 16-bit range (%.2f m) were written as 0", n_clipped, 65.535 * depth_scale)
+    (out / "dataset_info.md").write_text(
+        f"# sixdpose synthetic dataset exported to BOP\n\nSource: {getattr(dataset, 'root', '?')}\n"
+        f"Split: {split}; depth_scale {depth_scale} mm; models in mm; {len(keys)} images.\n"
+        "Extra keys (ignored by bop_toolkit): models_info obj_name, scene_gt inst.\n"
+    )
+    return out

@@ -1,0 +1,120 @@
+"""Self-checks of a generated dataset (used by the tests, handy for users' own datasets)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..assets import load_catalog, load_mesh, resolve_assets_dir
+
+
+def backproject(depth: np.ndarray, K: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Points p_C (N, 3) metres of the pixels in ``mask`` with valid depth (> 0, finite)."""
+    v, u = np.nonzero(mask & np.isfinite(depth) & (depth > 0))
+    z = depth[v, u].astype(np.float64)
+    return np.stack([(u - K[0, 2]) * z / K[0, 0], (v - K[1, 2]) * z / K[1, 1], z], axis=1)
+
+
+def gt_surface_errors(dataset_dir: str | Path, assets: str | Path | None = None, max_images: int | None = None) -> list[dict]:
+    """For every annotated instance: mean and median distance (metres) between its back-projected
+    masked depth, moved into the object frame with the inverse GT pose, and the mesh surface.
+
+    Returns:
+        list of ``{"im_id", "obj_name", "inst", "n", "mean", "median"}``.
+    """
+    import open3d as o3d
+
+    from ..datasets.synthetic import SyntheticDataset
+
+    ds = SyntheticDataset(dataset_dir)
+    catalog = load_catalog(resolve_assets_dir(assets))
+    scenes: dict[str, o3d.t.geometry.RaycastingScene] = {}
+    out = []
+    for im_id in ds.image_ids[: max_images or None]:
+        s = ds.load(im_id)
+        for inst in s.instances:
+            if inst.obj_name not in scenes:
+                m = load_mesh(catalog[inst.obj_name].obj_path, with_texture=False)
+                rs = o3d.t.geometry.RaycastingScene()
+                rs.add_triangles(o3d.core.Tensor(m.vertices.astype(np.float32)), o3d.core.Tensor(m.faces.astype(np.uint32)))
+                scenes[inst.obj_name] = rs
+            p_C = backproject(s.depth, s.K, inst.mask)
+            if len(p_C) == 0:
+                continue
+            p_O = (p_C - inst.t) @ inst.R  # R^T (p - t)
+            d = scenes[inst.obj_name].compute_distance(o3d.core.Tensor(p_O.astype(np.float32))).numpy()
+            out.append({"im_id": im_id, "obj_name": inst.obj_name, "inst": inst.inst, "n": len(d),
+                        "mean": float(d.mean()), "median": float(np.median(d))})
+    return out
+
+
+def box_penetration(X_a: np.ndarray, size_a: np.ndarray, X_b: np.ndarray, size_b: np.ndarray) -> float:
+    """Penetration depth (metres, 0 if apart) of two oriented boxes, by the separating axis theorem.
+
+    Args:
+        X_a, X_b: (4, 4) poses of the box centres in a common frame; size_a, size_b: (3,) edge lengths.
+    Returns:
+        the smallest overlap over the 15 candidate axes (0.0 if some axis separates them).
+    """
+    Ra, Rb = X_a[:3, :3], X_b[:3, :3]
+    d = X_b[:3, 3] - X_a[:3, 3]
+    ha, hb = np.asarray(size_a) / 2, np.asarray(size_b) / 2
+    axes = [Ra[:, i] for i in range(3)] + [Rb[:, i] for i in range(3)]
+    axes += [np.cross(Ra[:, i], Rb[:, j]) for i in range(3) for j in range(3)]
+    best = np.inf
+    for ax in axes:
+        n = np.linalg.norm(ax)
+        if n < 1e-9:
+            continue
+        ax = ax / n
+        ra = np.sum(ha * np.abs(Ra.T @ ax))
+        rb = np.sum(hb * np.abs(Rb.T @ ax))
+        overlap = ra + rb - abs(d @ ax)
+        if overlap <= 0:
+            return 0.0
+        best = min(best, overlap)
+    return float(best)
+
+
+def resting_penetrations(dataset_dir: str | Path, assets: str | Path | None = None) -> dict:
+    """Worst penetrations after settling, from the final poses in ``manifest.json``.
+
+    Returns:
+        ``{"table": metres the lowest contact point of an object on the table lies below the table
+        top, "pairs": largest box-box penetration between two objects, "pair": (name, name)}``.
+    """
+    import json
+
+    from ..assets import physical_properties
+    from .config import GenerationConfig
+
+    root = Path(dataset_dir)
+    man = json.loads((root / "manifest.json").read_text())
+    cfg = GenerationConfig.from_dict(man["config"])
+    catalog = load_catalog(resolve_assets_dir(assets))
+    worst_table, worst_pair, pair = 0.0, 0.0, None
+    hx, hy = cfg.table_size[0] / 2, cfg.table_size[1] / 2
+    for scene in man["scenes"].values():
+        boxes = []
+        for o in scene["objects"]:
+            if o["left_scene"]:
+                continue
+            pr = physical_properties(load_mesh(catalog[o["name"]].obj_path, with_texture=False), catalog[o["name"]].mass)
+            X = np.eye(4)
+            X[:3, :3] = np.asarray(o["R_WO"])
+            X[:3, 3] = o["t_WO"]
+            Xc = X.copy()
+            Xc[:3, 3] = X[:3, :3] @ pr.box_center + X[:3, 3]
+            corners = (Xc[:3, :3] @ (np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)]) * pr.box_size / 2).T).T + Xc[:3, 3]
+            over_table = (np.abs(corners[:, 0]) < hx) & (np.abs(corners[:, 1]) < hy)
+            on_table = Xc[2, 3] > cfg.table_height and abs(Xc[0, 3]) < hx and abs(Xc[1, 3]) < hy
+            if on_table and over_table.any():
+                worst_table = max(worst_table, float(cfg.table_height - corners[over_table, 2].min()))
+            boxes.append((o["name"], Xc, pr.box_size))
+        for i in range(len(boxes)):
+            for j in range(i + 1, len(boxes)):
+                p = box_penetration(boxes[i][1], boxes[i][2], boxes[j][1], boxes[j][2])
+                if p > worst_pair:
+                    worst_pair, pair = p, (boxes[i][0], boxes[j][0])
+    return {"table": worst_table, "pairs": worst_pair, "pair": pair}

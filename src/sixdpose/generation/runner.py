@@ -1,0 +1,359 @@
+"""Running the generator: validation, models, parallel scenes (local processes or Ray), resume.
+
+The unit of work is a scene, seeded from ``(seed, scene index)``; image numbers are
+``scene * views + view``. Output therefore does not depend on the number of workers or their order.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import resource
+import shutil
+import sys
+import time
+import traceback
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..assets import AssetError, load_catalog, load_mesh, physical_properties, point_cloud_diameter, resolve_assets_dir, sample_surface
+from ..constants import SYMMETRIC_OBJECTS, TARGET_OBJECTS, obj_id_of
+from .config import GenerationConfig
+from .config import profile as get_profile
+from .scene import camera_arc, default_pools, sample_scene, scene_rng
+from .writer import (
+    PARTIAL,
+    RECORDS,
+    atomic_write_text,
+    commit_scene,
+    finalize,
+    read_records,
+    scene_files,
+    write_attribution,
+    write_ply,
+    yaml_text,
+)
+
+CONFIG_FILE = "config.yml"
+GENERATOR = f"sixdpose.generation {__version__}"
+
+
+class GenerationError(Exception):
+    """Bad arguments or output directory; the message is one line naming the problem."""
+
+
+# ----------------------------------------------------------------------------------------------
+# one scene (runs in a worker process)
+# ----------------------------------------------------------------------------------------------
+_PROPS: dict = {}
+
+
+def _props(catalog, name):
+    if name not in _PROPS:
+        obj = catalog[name]
+        _PROPS[name] = physical_properties(load_mesh(obj.obj_path, with_texture=False), obj.mass)
+    return _PROPS[name]
+
+
+def _flat(a) -> list:
+    return [float(x) for x in np.asarray(a, dtype=np.float64).ravel()]
+
+
+def _rows(a) -> list:
+    return [[float(x) for x in row] for row in np.asarray(a, dtype=np.float64)]
+
+
+def render_scene(root: Path, cfg: GenerationConfig, assets_dir: Path, scene: int) -> dict:
+    """Simulate, render and commit scene ``scene`` into dataset ``root``.
+
+    Returns:
+        ``{"scene", "ok", "images", "seconds", "peak_rss_mb"}`` plus ``"error"`` if the scene failed
+        (it then has no record and is retried by the next run).
+    """
+    t0 = time.perf_counter()
+    try:
+        from .sim import SceneSimulator, intrinsics
+
+        catalog = load_catalog(assets_dir)
+        targets, noise = default_pools(catalog)
+        K = intrinsics(cfg)
+        for attempt in range(cfg.max_attempts):
+            rng = scene_rng(cfg.seed, scene, attempt)
+            specs = sample_scene(rng, cfg, _PropsView(catalog), targets, noise)
+            cams = camera_arc(rng, cfg)
+            sim = SceneSimulator(specs, _PropsView(catalog), {s.name: catalog[s.name].obj_path for s in specs}, cfg)
+            res = sim.settle()
+            if res.at_rest:
+                break
+            del sim
+        else:
+            raise RuntimeError(f"not at rest after {cfg.sim_time} s in {cfg.max_attempts} attempts")
+        views, images = {}, []
+        for v, X_WC in enumerate(cams):
+            im_id = scene * cfg.views + v
+            rgb, depth, label = sim.render(X_WC)
+            X_CW = np.linalg.inv(X_WC)
+            insts, objs = [], []
+            for k, s in enumerate(specs):
+                if s.role != "target" or k in res.left:
+                    continue
+                mask = label == k + 1
+                px = int(mask.sum())
+                if px == 0:
+                    continue
+                X_CO = X_CW @ res.X_WO[k]
+                insts.append((s.name, s.inst, mask))
+                objs.append({"obj_name": s.name, "obj_id": obj_id_of(s.name), "inst": s.inst,
+                             "R": _rows(X_CO[:3, :3]), "t": _flat(X_CO[:3, 3]), "px_visib": px})
+            views[im_id] = {"rgb": rgb, "depth": depth, "instances": insts}
+            images.append({"im_id": im_id, "cam_K": _rows(K), "cam_R_WC": _rows(X_WC[:3, :3]),
+                           "cam_t_WC": _flat(X_WC[:3, 3]), "objects": objs})
+        objects = [
+            {"name": s.name, "role": s.role, "inst": s.inst, "dropped_off_table": s.off_table,
+             "off_table": k in res.off_table, "left_scene": k in res.left,
+             "R_WO": _rows(res.X_WO[k][:3, :3]), "t_WO": _flat(res.X_WO[k][:3, 3])}
+            for k, s in enumerate(specs)
+        ]
+        record = {"scene": scene, "attempt": attempt, "sim_time": round(res.sim_time, 6),
+                  "image_range": [scene * cfg.views, scene * cfg.views + cfg.views - 1],
+                  "objects": objects, "images": images}
+        commit_scene(root, scene, scene_files(views), record)
+        return {"scene": scene, "ok": True, "images": cfg.views, "seconds": time.perf_counter() - t0,
+                "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+    except Exception as e:  # recorded per scene; the run goes on
+        return {"scene": scene, "ok": False, "images": 0, "seconds": time.perf_counter() - t0,
+                "error": f"{type(e).__name__}: {e}", "traceback": traceback.format_exc(),
+                "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+class _PropsView(dict):
+    """Lazy name -> PhysicalProperties mapping backed by the per-process cache."""
+
+    def __init__(self, catalog):
+        super().__init__()
+        self._catalog = catalog
+
+    def __missing__(self, name):
+        return _props(self._catalog, name)
+
+
+def _worker_init():
+    # llvmpipe: one rendering thread per worker (workers are the parallelism)
+    os.environ.setdefault("LP_NUM_THREADS", "1")
+
+
+def _worker(args):
+    root, cfg_dict, assets_dir, scene = args
+    return render_scene(Path(root), GenerationConfig.from_dict(cfg_dict), Path(assets_dir), scene)
+
+
+# ----------------------------------------------------------------------------------------------
+# models, validation, driver
+# ----------------------------------------------------------------------------------------------
+def write_models(root: Path, cfg: GenerationConfig, catalog) -> None:
+    """Write ``models/<target>.ply`` (coloured, with normals, metres) and ``models/models_info.yml``."""
+    info = {}
+    for name in TARGET_OBJECTS:
+        mesh = load_mesh(catalog[name].obj_path)
+        pts, nrm, col = sample_surface(mesh, cfg.model_points, seed=obj_id_of(name))
+        write_ply(root / "models" / f"{name}.ply", pts, nrm, col)
+        lo, hi = mesh.vertices.min(0), mesh.vertices.max(0)
+        info[name] = {
+            "obj_id": obj_id_of(name),
+            "diameter": float(point_cloud_diameter(mesh.vertices)),
+            "min_x": float(lo[0]), "min_y": float(lo[1]), "min_z": float(lo[2]),
+            "size_x": float(hi[0] - lo[0]), "size_y": float(hi[1] - lo[1]), "size_z": float(hi[2] - lo[2]),
+            "symmetric": name in SYMMETRIC_OBJECTS,
+        }
+    atomic_write_text(root / "models" / "models_info.yml", yaml_text(info))
+
+
+def prepare_output(out: Path, cfg: GenerationConfig) -> bool:
+    """Check ``out`` can hold this dataset. Returns True if it resumes an existing one.
+
+    A non-empty directory is accepted only if it is a dataset of this generator made with the same
+    configuration (``scenes`` may grow: the run then extends it).
+
+    Raises:
+        GenerationError: ``out`` is a file, unwritable, foreign, or made with another configuration.
+    """
+    if out.exists() and not out.is_dir():
+        raise GenerationError(f"{out}: exists and is not a directory")
+    if out.is_dir() and any(out.iterdir()):
+        cfg_file = out / CONFIG_FILE
+        if not cfg_file.is_file():
+            raise GenerationError(f"{out}: directory is not empty and is not a sixdpose dataset (no {CONFIG_FILE})")
+        import yaml
+
+        try:
+            old = GenerationConfig.from_dict(yaml.safe_load(cfg_file.read_text()))
+        except Exception as e:
+            raise GenerationError(f"{cfg_file}: unreadable dataset config ({e})") from None
+        if dataclasses.replace(old, scenes=cfg.scenes) != cfg:
+            diff = [f.name for f in dataclasses.fields(cfg) if getattr(old, f.name) != getattr(cfg, f.name) and f.name != "scenes"]
+            raise GenerationError(f"{out}: holds a dataset made with a different config ({', '.join(diff)}); use another --out")
+        if not os.access(out, os.W_OK):
+            raise GenerationError(f"{out}: directory is not writable")
+        return True
+    parent = out if out.is_dir() else out.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not os.access(parent, os.W_OK):
+        raise GenerationError(f"{out}: cannot create output directory (no write permission in {parent})")
+    return False
+
+
+def generate(
+    out: str | os.PathLike,
+    cfg: GenerationConfig,
+    workers: int = 1,
+    assets: str | os.PathLike | None = None,
+    executor: str = "local",
+    address: str | None = None,
+    progress: bool = True,
+) -> dict:
+    """Generate (or finish, or extend) a dataset in ``out``.
+
+    Args:
+        out: output directory (created; an existing dataset with the same config is resumed).
+        cfg: configuration (see :mod:`.config`).
+        workers: parallel scene workers (local processes; with Ray, CPUs requested when starting a
+            local instance).
+        assets: YCB asset directory (default: ``$SIXDPOSE_YCB``).
+        executor: ``"local"`` or ``"ray"``.
+        address: Ray cluster address (``None``: start a local instance).
+        progress: show a progress bar on stderr.
+    Returns:
+        summary dict: ``scenes_done``, ``scenes_failed`` (list of {scene, error}), ``images``,
+        ``seconds``, ``images_per_s``, ``peak_rss_mb`` (largest worker), ``manifest``.
+    Raises:
+        GenerationError, AssetError: bad arguments (nothing is written then).
+    """
+    try:
+        cfg.validate()
+    except ValueError as e:
+        raise GenerationError(str(e)) from None
+    if workers < 1:
+        raise GenerationError(f"--workers must be >= 1, got {workers}")
+    if executor not in ("local", "ray"):
+        raise GenerationError(f"--executor must be 'local' or 'ray', got {executor!r}")
+    assets_dir = resolve_assets_dir(assets)
+    catalog = load_catalog(assets_dir)
+    try:
+        default_pools(catalog)
+    except KeyError as e:
+        raise AssetError(f"{assets_dir}: {e.args[0]}") from None
+    out = Path(out)
+    resuming = prepare_output(out, cfg)
+
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / CONFIG_FILE, cfg.to_yaml())
+    shutil.rmtree(out / PARTIAL, ignore_errors=True)
+    (out / RECORDS).mkdir(exist_ok=True)
+    if not (out / "models" / "models_info.yml").is_file():
+        write_models(out, cfg, catalog)
+    write_attribution(out, assets_dir)
+
+    records = read_records(out)
+    todo = [s for s in range(cfg.scenes) if s not in records]
+    t0 = time.perf_counter()
+    results = []
+    from tqdm import tqdm
+
+    bar = tqdm(total=cfg.scenes, initial=cfg.scenes - len(todo), unit="scene", desc="generate",
+               disable=not progress, file=sys.stderr, dynamic_ncols=True)
+    images = 0
+    for r in _run(todo, out, cfg, assets_dir, workers, executor, address):
+        results.append(r)
+        images += r["images"]
+        bar.update(1)
+        el = time.perf_counter() - t0
+        bar.set_postfix_str(f"{images / el:.2f} img/s" + (f", {sum(not x['ok'] for x in results)} failed" if not r["ok"] else ""))
+        if not r["ok"]:
+            bar.write(f"scene {r['scene']} failed: {r['error']}")
+    bar.close()
+    seconds = time.perf_counter() - t0
+    failed = [{"scene": r["scene"], "error": r["error"]} for r in results if not r["ok"]]
+    import pydrake
+
+    head = {
+        "generator": GENERATOR,
+        "drake": getattr(pydrake, "__version__", None) or _drake_version(),
+        "seed": cfg.seed,
+        "config": cfg.to_dict(),
+        "attribution": "ATTRIBUTION.txt",
+        "failed_scenes": sorted(f["scene"] for f in failed),
+    }
+    manifest = finalize(out, read_records(out), head)
+    return {
+        "resumed": resuming,
+        "scenes_done": sum(r["ok"] for r in results),
+        "scenes_failed": failed,
+        "images": images,
+        "seconds": seconds,
+        "images_per_s": images / seconds if seconds > 0 else float("nan"),
+        "peak_rss_mb": max((r["peak_rss_mb"] for r in results), default=0.0),
+        "manifest": manifest,
+    }
+
+
+def _drake_version() -> str | None:
+    try:
+        from importlib.metadata import version
+
+        return version("drake")
+    except Exception:
+        return None
+
+
+def _run(todo, out, cfg, assets_dir, workers, executor, address):
+    args = [(str(out), cfg.to_dict(), str(assets_dir), s) for s in todo]
+    if not args:
+        return
+    if executor == "ray":
+        yield from _run_ray(args, workers, address)
+        return
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    with ctx.Pool(min(workers, len(args)), initializer=_worker_init, maxtasksperchild=50) as pool:
+        yield from pool.imap_unordered(_worker, args)
+
+
+def _run_ray(args, workers, address):
+    import ray
+
+    started = False
+    if not ray.is_initialized():
+        kw = {"address": address} if address else {"num_cpus": workers, "include_dashboard": False}
+        ray.init(ignore_reinit_error=True, log_to_driver=False, **kw)
+        started = True
+    try:
+        task = ray.remote(num_cpus=1, runtime_env={"env_vars": {"LP_NUM_THREADS": "1"}})(_worker)
+        pending = [task.remote(a) for a in args]
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            yield ray.get(done[0])
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def ensure_dataset(path: str | os.PathLike, profile: str = "smoke", workers: int | None = None, **overrides) -> Path:
+    """Return ``path``, generating the named profile's dataset there first if it is not complete.
+
+    Used by the notebooks so each can run on its own (``profile``: smoke, demo or paper;
+    ``overrides``: config fields such as ``scenes``).
+    """
+    path = Path(path)
+    cfg = get_profile(profile, **overrides)
+    if (path / "gt.yml").is_file() and (path / CONFIG_FILE).is_file():
+        import yaml
+
+        if GenerationConfig.from_dict(yaml.safe_load((path / CONFIG_FILE).read_text())) == cfg and len(read_records(path)) >= cfg.scenes:
+            return path
+    generate(path, cfg, workers=workers or min(2, os.cpu_count() or 1))
+    return path

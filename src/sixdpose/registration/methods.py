@@ -1,0 +1,253 @@
+"""The hybrid pose methods of section IV-B: RANSAC and FGR on FPFH features (Open3D), Super4PCS,
+each optionally refined by ICP (point-to-point or point-to-plane, Open3D).
+
+Every method has the same signature ``method(scene, ref, cfg) -> PoseEstimate``:
+
+* ``scene``: a :class:`SceneCloud` (the masked camera-frame cloud, prepared by :func:`prepare_scene`),
+* ``ref``: the object's :class:`~sixdpose.registration.geometry.Reference`,
+* ``cfg``: a :class:`~sixdpose.registration.presets.RegistrationConfig`,
+
+and returns the pose ``X_CO`` (4x4, metres) with its score and the seconds it took. Registration
+runs scene -> model (every scene point has a counterpart on the full model; point-to-plane ICP uses the
+model's exact normals) and the result is inverted. :func:`estimate_pose` runs the whole per-instance
+pipeline (cloud preparation, method, ICP) and charges every step's time (normals, features,
+downsampling, first-use model preparation) to the instance, except disk reads (paper section V-A).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .geometry import Reference, ReferenceCache, compute_fpfh, estimate_normals, to_o3d
+from .presets import RegistrationConfig
+
+METHODS = ("ransac", "fgr", "super4pcs")
+
+
+@dataclass
+class SceneCloud:
+    """A prepared masked scene cloud (camera frame, metres).
+
+    Attributes:
+        pcd: Open3D cloud with normals oriented toward the camera. voxel: the length unit (m) that
+        scales feature radii and distances. fpfh: FPFH features or None. time: preparation seconds.
+    """
+
+    pcd: object
+    voxel: float
+    fpfh: object | None = None
+    time: float = 0.0
+
+    @property
+    def points(self) -> np.ndarray:
+        return np.asarray(self.pcd.points)
+
+    @property
+    def normals(self) -> np.ndarray:
+        return np.asarray(self.pcd.normals)
+
+
+@dataclass
+class PoseEstimate:
+    """Output of a method.
+
+    Attributes:
+        T: (4, 4) ``X_CO`` (object in camera; metres). score: fitness in [0, 1] (inlier fraction of
+        the scene cloud; LCP for Super4PCS). time: seconds, every step but disk reads.
+        info: method-specific diagnostics.
+    """
+
+    T: np.ndarray
+    score: float
+    time: float
+    info: dict = field(default_factory=dict)
+
+
+def voxel_sizes(cfg: RegistrationConfig, diameter: float) -> tuple[float | None, float, float]:
+    """``(scene voxel or None, model voxel, feature unit)`` in metres for an object of ``diameter``."""
+    scene_v = None if cfg.scene_voxel_rel is None else cfg.scene_voxel_rel * diameter
+    model_v = cfg.model_voxel if cfg.model_voxel_rel is None else cfg.model_voxel_rel * diameter
+    unit = scene_v if scene_v is not None else cfg.feature_voxel
+    return scene_v, model_v, unit
+
+
+def prepare_scene(points: np.ndarray, diameter: float, cfg: RegistrationConfig, features: bool) -> SceneCloud:
+    """Gate, downsample, estimate normals (k=10 plane fit toward the camera) and optionally FPFH.
+
+    Args:
+        points: (N, 3) masked camera-frame points, metres. diameter: object diameter, metres.
+        cfg: configuration. features: compute FPFH (RANSAC, FGR).
+    Returns:
+        :class:`SceneCloud` (its ``time`` covers this preparation).
+    """
+    t0 = time.perf_counter()
+    pts = np.asarray(points, dtype=np.float64)
+    if cfg.gate_rel is not None and len(pts):
+        med = np.median(pts, axis=0)
+        pts = pts[np.linalg.norm(pts - med, axis=1) <= cfg.gate_rel * diameter]
+    scene_v, _, unit = voxel_sizes(cfg, diameter)
+    pcd = to_o3d(pts)
+    if scene_v is not None:
+        pcd = pcd.voxel_down_sample(scene_v)
+    estimate_normals(pcd, knn=cfg.normal_knn)
+    feat = compute_fpfh(pcd, cfg.fpfh_radius_factor * unit, cfg.fpfh_max_nn) if features else None
+    return SceneCloud(pcd, unit, feat, time.perf_counter() - t0)
+
+
+def _invert(T: np.ndarray) -> np.ndarray:
+    Ti = np.eye(4)
+    Ti[:3, :3] = T[:3, :3].T
+    Ti[:3, 3] = -T[:3, :3].T @ T[:3, 3]
+    return Ti
+
+
+def register_ransac(scene: SceneCloud, ref: Reference, cfg: RegistrationConfig) -> PoseEstimate:
+    """RANSAC on FPFH correspondences (Open3D ``registration_ransac_based_on_feature_matching``).
+
+    Returns the pose ``X_CO``; score = RANSAC fitness (inlier fraction of the scene cloud).
+    """
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    t0 = time.perf_counter()
+    dist = cfg.ransac_distance_factor * scene.voxel
+    o3d.utility.random.seed(cfg.seed)
+    res = reg.registration_ransac_based_on_feature_matching(
+        scene.pcd,
+        ref.pcd,
+        scene.fpfh,
+        ref.fpfh,
+        cfg.ransac_mutual_filter,
+        dist,
+        reg.TransformationEstimationPointToPoint(False),
+        cfg.ransac_n,
+        [reg.CorrespondenceCheckerBasedOnEdgeLength(cfg.ransac_edge_length), reg.CorrespondenceCheckerBasedOnDistance(dist)],
+        reg.RANSACConvergenceCriteria(cfg.ransac_max_iteration, cfg.ransac_confidence),
+    )
+    T = _invert(np.asarray(res.transformation))
+    return PoseEstimate(T, float(res.fitness), time.perf_counter() - t0, {"inlier_rmse": float(res.inlier_rmse)})
+
+
+def register_fgr(scene: SceneCloud, ref: Reference, cfg: RegistrationConfig) -> PoseEstimate:
+    """Fast Global Registration on FPFH features (Open3D ``registration_fgr_based_on_feature_matching``).
+
+    Returns the pose ``X_CO``; score = fitness at the FGR distance (inlier fraction of the scene).
+    """
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    t0 = time.perf_counter()
+    dist = cfg.fgr_distance_factor * scene.voxel
+    opt = reg.FastGlobalRegistrationOption(maximum_correspondence_distance=dist, iteration_number=cfg.fgr_iterations)
+    res = reg.registration_fgr_based_on_feature_matching(scene.pcd, ref.pcd, scene.fpfh, ref.fpfh, opt)
+    Tsm = np.asarray(res.transformation)
+    ev = reg.evaluate_registration(scene.pcd, ref.pcd, max(dist, cfg.ransac_distance_factor * scene.voxel), Tsm)
+    return PoseEstimate(_invert(Tsm), float(ev.fitness), time.perf_counter() - t0, {})
+
+
+def register_super4pcs(scene: SceneCloud, ref: Reference, cfg: RegistrationConfig) -> PoseEstimate:
+    """Super4PCS with normals (:func:`~sixdpose.registration.super4pcs.super4pcs`).
+
+    The LCP is verified against a reference cloud 3x denser than ``ref`` when ``ref.extra`` has one
+    (``"verify"``). Returns the pose ``X_CO``; score = LCP.
+    """
+    from .super4pcs import super4pcs
+
+    t0 = time.perf_counter()
+    delta = cfg.s4pcs_delta if cfg.s4pcs_delta_rel is None else cfg.s4pcs_delta_rel * ref.diameter
+    ver = ref.extra.get("verify")
+    res = super4pcs(
+        scene.points,
+        scene.normals,
+        ref.points,
+        ref.normals,
+        overlap=cfg.s4pcs_overlap,
+        delta=delta,
+        n_samples=cfg.s4pcs_samples,
+        n_bases=cfg.s4pcs_bases,
+        max_time=cfg.s4pcs_max_time,
+        normal_tol_deg=cfg.s4pcs_normal_tol_deg,
+        stop_lcp=cfg.s4pcs_stop_lcp,
+        max_candidates=cfg.s4pcs_max_candidates,
+        seed=cfg.seed,
+        Q_verify=None if ver is None else ver[0],
+        Qn_verify=None if ver is None else ver[1],
+    )
+    info = {"n_bases": res.n_bases, "n_congruent": res.n_congruent, "n_verified": res.n_verified}
+    return PoseEstimate(_invert(res.T), float(res.lcp), time.perf_counter() - t0, info)
+
+
+def refine_icp(scene: SceneCloud, ref: Reference, T_co: np.ndarray, cfg: RegistrationConfig) -> PoseEstimate:
+    """ICP refinement (Open3D ``registration_icp``) of the pose ``T_co`` (X_CO, 4x4).
+
+    ``cfg.icp_kind``: ``"point_to_plane"`` (model normals) or ``"point_to_point"``; correspondence
+    distance ``cfg.icp_distance_factor`` x the scene voxel. Returns the refined ``X_CO`` with the ICP
+    fitness as score.
+    """
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    t0 = time.perf_counter()
+    if cfg.icp_kind == "point_to_plane":
+        est = reg.TransformationEstimationPointToPlane()
+    elif cfg.icp_kind == "point_to_point":
+        est = reg.TransformationEstimationPointToPoint(False)
+    else:
+        raise ValueError(f"icp_kind must be point_to_plane or point_to_point, got {cfg.icp_kind!r}")
+    dist = cfg.icp_distance_factor * scene.voxel
+    res = reg.registration_icp(
+        scene.pcd, ref.pcd, dist, _invert(T_co), est, reg.ICPConvergenceCriteria(max_iteration=cfg.icp_max_iteration)
+    )
+    return PoseEstimate(_invert(np.asarray(res.transformation)), float(res.fitness), time.perf_counter() - t0, {})
+
+
+_FUNCS = {"ransac": register_ransac, "fgr": register_fgr, "super4pcs": register_super4pcs}
+
+
+def get_reference(cache: ReferenceCache, obj_id: int, method: str, cfg: RegistrationConfig) -> tuple[Reference, float]:
+    """The cached reference of ``obj_id`` for ``method`` (FPFH only for RANSAC/FGR; a 3x denser
+    verification cloud for Super4PCS); returns ``(reference, seconds spent building it now)``."""
+    model = cache.dataset.model(obj_id)
+    scene_v, model_v, unit = voxel_sizes(cfg, model.diameter)
+    feats = method in ("ransac", "fgr")
+    ref, dt = cache.get(obj_id, model_v, cfg.fpfh_radius_factor * unit if feats else None)
+    if method == "super4pcs" and "verify" not in ref.extra:
+        t0 = time.perf_counter()
+        dense, _ = cache.get(obj_id, model_v / 3.0, None)
+        ref.extra["verify"] = (dense.points, dense.normals)
+        dt += time.perf_counter() - t0
+    return ref, dt
+
+
+def estimate_pose(
+    points: np.ndarray, obj_id: int, method: str, cache: ReferenceCache, cfg: RegistrationConfig, icp: bool = False
+) -> PoseEstimate:
+    """Full per-instance pipeline: scene preparation, global registration, optional ICP.
+
+    Args:
+        points: (N, 3) masked camera-frame points (metres), N >= 3.
+        obj_id: object id (its model comes from ``cache.dataset``).
+        method: ``"ransac"``, ``"fgr"`` or ``"super4pcs"``.
+        cache: per-process :class:`ReferenceCache`.
+        cfg: configuration. icp: refine with ICP.
+    Returns:
+        :class:`PoseEstimate` whose ``time`` includes scene preparation, the first-use cost of the
+        model's reference (charged once per process), the method and ICP.
+    """
+    if method not in _FUNCS:
+        raise ValueError(f"unknown method {method!r} (choose from {', '.join(METHODS)})")
+    ref, t_ref = get_reference(cache, obj_id, method, cfg)
+    scene = prepare_scene(points, ref.diameter, cfg, features=method in ("ransac", "fgr"))
+    if len(scene.points) < 3:
+        return PoseEstimate(np.eye(4), 0.0, scene.time + t_ref, {"reason": "fewer than 3 points after gating"})
+    est = _FUNCS[method](scene, ref, cfg)
+    total = t_ref + scene.time + est.time
+    info = dict(est.info, global_score=est.score, n_scene=len(scene.points))
+    if icp:
+        r = refine_icp(scene, ref, est.T, cfg)
+        total += r.time
+        return PoseEstimate(r.T, r.score, total, info)
+    return PoseEstimate(est.T, est.score, total, info)

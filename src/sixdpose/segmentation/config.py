@@ -1,0 +1,230 @@
+"""Typed training / inference configuration of the Mask R-CNN stage, with named profiles.
+
+Two profiles are defined:
+
+``paper``
+    Section IV-A of the paper: Mask R-CNN with a ResNet-50-FPN backbone initialised from ImageNet
+    weights (when they are in the local torch hub cache), no frozen layers, Adam at 1e-3 decayed by
+    10x every 30 epochs, 100 epochs, a seeded random 90/10 image split for the synthetic dataset
+    (BOP data: the ``train``/``test`` split directories as given). Images at their native 640x480
+    resolution (torchvision's ``min_size``/``max_size`` set so a 640x480 image is not rescaled at test time). Augmentation
+    (not specified by the paper, chosen here): photometric colour jitter and multi-scale training
+    (the shorter side is drawn from ``train_min_sizes`` each step, i.e. scales 0.8x..1.2x).
+
+``smoke``
+    The same code path, sized for a CPU continuous-integration run of a few minutes: images resized
+    to a shorter side of 200 px (multi-scale 180-220 in training) with anchors halved accordingly
+    (16-256 px), a ResNet-18-FPN with 64 channels and lighter heads, random init (no download is
+    attempted), 40 epochs of at most 3 steps of 2 images (<= 120 steps, about 1-1.5 min on one core).
+    On the 6-image smoke dataset it overfits its training images (mask AP50 about 0.7-0.85).
+
+A config is saved as ``config.json`` in the run directory and read back on ``--resume`` and by
+inference, so a run always records exactly what trained it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+
+@dataclass
+class SegConfig:
+    """Every setting of a segmentation run (see the module docstring for the named profiles).
+
+    Model:
+        backbone: ``resnet50`` (paper), ``resnet34`` or ``resnet18``.
+        pretrained: initialise the backbone with ImageNet weights if they are in the local torch hub
+            cache (never downloaded); otherwise random initialisation, said in one line.
+        trainable_layers: backbone stages left trainable (5 = none frozen, as the paper).
+        fpn_channels: FPN output channels (torchvision default 256).
+        box_head_dim: hidden size of the two-layer box head (torchvision default 1024).
+        mask_head_channels: channels of each of the 4 conv layers of the mask head (default 256).
+        min_size, max_size: test-time resize of the shorter / longer image side (pixels).
+        train_min_sizes: shorter sides drawn at random per training step (multi-scale augmentation).
+        anchor_sizes: RPN anchor size (pixels, after resizing) of each of the 5 FPN levels; aspect
+            ratios 0.5, 1, 2 (torchvision defaults).
+        rpn_pre_nms_train, rpn_post_nms_train, rpn_pre_nms_test, rpn_post_nms_test: RPN proposals.
+        rpn_batch_size, box_batch_size: sampled anchors / RoIs per image for the losses.
+        detections_per_img: detections kept per image.
+        score_thresh: minimum score of a returned detection (low, so AP sees the full curve;
+            consumers of the masks apply their own threshold).
+
+    Optimisation:
+        epochs, batch_size (per process), lr, lr_step_epochs, lr_gamma, weight_decay, grad_clip
+        (max gradient norm; 0 disables), max_steps_per_epoch (0 = full epochs), amp (mixed precision,
+        only on CUDA).
+
+    Data:
+        val_fraction: share of synthetic images held out for testing (seeded random split).
+        split_by: ``image`` (the paper) or ``scene`` (no scene in both parts).
+        train_split, test_split: BOP split directories used for training / testing.
+        min_mask_pixels: instances with fewer visible pixels are dropped from training (logged).
+        color_jitter: (brightness, contrast, saturation, hue) strengths; all 0 disables it.
+        hflip_prob: horizontal flip probability (0: mirrored text and handedness would teach wrong
+            appearances; not used by the paper).
+        num_workers: data-loading worker processes.
+
+    Misc:
+        seed: seeds the split, the model initialisation, sampling and augmentation.
+        num_threads: torch CPU threads per process (0 = torch default).
+        log_every: steps between CSV rows of the metrics log.
+    """
+
+    profile: str = "paper"
+    # model
+    backbone: str = "resnet50"
+    pretrained: bool = True
+    trainable_layers: int = 5
+    fpn_channels: int = 256
+    box_head_dim: int = 1024
+    mask_head_channels: int = 256
+    min_size: int = 480
+    max_size: int = 800
+    train_min_sizes: tuple[int, ...] = (384, 416, 448, 480, 512, 544, 576)
+    anchor_sizes: tuple[int, ...] = (32, 64, 128, 256, 512)
+    rpn_pre_nms_train: int = 2000
+    rpn_post_nms_train: int = 2000
+    rpn_pre_nms_test: int = 1000
+    rpn_post_nms_test: int = 1000
+    rpn_batch_size: int = 256
+    box_batch_size: int = 512
+    detections_per_img: int = 100
+    score_thresh: float = 0.05
+    # optimisation
+    epochs: int = 100
+    batch_size: int = 4
+    lr: float = 1e-3
+    lr_step_epochs: int = 30
+    lr_gamma: float = 0.1
+    weight_decay: float = 0.0
+    grad_clip: float = 10.0
+    max_steps_per_epoch: int = 0
+    amp: bool = True
+    # data
+    val_fraction: float = 0.1
+    split_by: str = "image"
+    train_split: str = "train"
+    test_split: str = "test"
+    min_mask_pixels: int = 1
+    color_jitter: tuple[float, float, float, float] = (0.3, 0.3, 0.3, 0.03)
+    hflip_prob: float = 0.0
+    num_workers: int = 2
+    # misc
+    seed: int = 0
+    num_threads: int = 0
+    log_every: int = 1
+
+    def __post_init__(self):
+        self.train_min_sizes = tuple(int(s) for s in self.train_min_sizes)
+        self.anchor_sizes = tuple(int(s) for s in self.anchor_sizes)
+        self.color_jitter = tuple(float(c) for c in self.color_jitter)
+        self.validate()
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the first invalid field."""
+        if self.backbone not in BACKBONES:
+            raise ValueError(f"backbone: {self.backbone!r} is not one of {sorted(BACKBONES)}")
+        if not 0 <= self.trainable_layers <= 5:
+            raise ValueError(f"trainable_layers: {self.trainable_layers} is not in 0..5")
+        if not 0.0 <= self.val_fraction < 1.0:
+            raise ValueError(f"val_fraction: {self.val_fraction} is not in [0, 1)")
+        if self.split_by not in ("image", "scene"):
+            raise ValueError(f"split_by: {self.split_by!r} is not 'image' or 'scene'")
+        for name in ("epochs", "batch_size", "min_size", "max_size", "lr_step_epochs", "log_every"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name}: must be >= 1, got {getattr(self, name)}")
+        if len(self.anchor_sizes) != 5:
+            raise ValueError("anchor_sizes: expected one size per FPN level (5)")
+        if not self.train_min_sizes:
+            raise ValueError("train_min_sizes: must not be empty")
+        if len(self.color_jitter) != 4:
+            raise ValueError("color_jitter: expected (brightness, contrast, saturation, hue)")
+
+    # -- (de)serialisation ------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        """The config as a JSON-compatible dict."""
+        d = asdict(self)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "SegConfig":
+        """Build a config from :meth:`to_dict` output; unknown keys raise ``ValueError``."""
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - names)
+        if unknown:
+            raise ValueError(f"unknown config field(s): {', '.join(unknown)}")
+        return cls(**d)
+
+    def save(self, path: str | Path) -> None:
+        """Write the config as JSON (atomically)."""
+        path = Path(path)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        tmp.replace(path)
+
+    @classmethod
+    def load(cls, path: str | Path) -> "SegConfig":
+        """Read a config written by :meth:`save`; raise ``ValueError`` if it is malformed."""
+        path = Path(path)
+        try:
+            d = json.loads(path.read_text())
+        except json.JSONDecodeError as e:
+            raise ValueError(f"{path}: corrupt config ({e})") from None
+        if not isinstance(d, dict):
+            raise ValueError(f"{path}: expected a JSON object")
+        return cls.from_dict(d)
+
+    def replace(self, **changes) -> "SegConfig":
+        """A copy with ``changes`` applied (validated)."""
+        return dataclasses.replace(self, **changes)
+
+
+#: Backbones the model builder knows (torchvision ResNets; the feature pyramid is built on top).
+BACKBONES = ("resnet18", "resnet34", "resnet50")
+
+#: Named profiles (see the module docstring).
+PROFILES: dict[str, SegConfig] = {
+    "paper": SegConfig(profile="paper"),
+    "smoke": SegConfig(
+        profile="smoke",
+        backbone="resnet18",
+        pretrained=False,
+        trainable_layers=5,
+        fpn_channels=64,
+        box_head_dim=256,
+        mask_head_channels=64,
+        min_size=200,
+        max_size=400,
+        train_min_sizes=(180, 200, 220),
+        anchor_sizes=(16, 32, 64, 128, 256),
+        rpn_pre_nms_train=300,
+        rpn_post_nms_train=150,
+        rpn_pre_nms_test=300,
+        rpn_post_nms_test=100,
+        rpn_batch_size=128,
+        box_batch_size=64,
+        detections_per_img=50,
+        epochs=40,
+        batch_size=2,
+        lr=1e-3,
+        lr_step_epochs=30,
+        max_steps_per_epoch=3,
+        val_fraction=0.1,
+        num_workers=0,
+        num_threads=1,
+        color_jitter=(0.1, 0.1, 0.1, 0.0),
+    ),
+}
+
+
+def profile_config(name: str, **overrides) -> SegConfig:
+    """The config of profile ``name`` with ``overrides`` applied; ``ValueError`` if unknown."""
+    if name not in PROFILES:
+        raise ValueError(f"unknown profile {name!r} (known: {', '.join(PROFILES)})")
+    return PROFILES[name].replace(**overrides)
+
+
+__all__ = ["BACKBONES", "PROFILES", "SegConfig", "profile_config"]

@@ -1,0 +1,248 @@
+"""Inference: a trained run -> per-image instance masks (the format the registration stage reads).
+
+Output of ``sixdpose segment --data DIR --ckpt RUN_DIR --out PRED_DIR`` (see the package docstring for
+the file format): ``PRED_DIR/<scene_id>_<im_id>.npz`` per image, ``PRED_DIR/coco_results.json`` and
+``PRED_DIR/meta.json`` (checkpoint, classes, images, score threshold).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from contextlib import nullcontext
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..datasets.base import DatasetError, open_dataset
+from . import checkpoint as ck
+from .config import SegConfig
+from .data import ClassMap, open_part, write_json
+from .model import build_model, set_train_sizes
+from .train import pick_device
+
+log = logging.getLogger("sixdpose.segmentation")
+
+
+def pred_path(pred_dir: str | Path, scene_id: int, im_id: int) -> Path:
+    """Path of the prediction file of one image: ``PRED_DIR/<scene_id>_<im_id>.npz`` (plain integers)."""
+    return Path(pred_dir) / f"{int(scene_id)}_{int(im_id)}.npz"
+
+
+def load_prediction(pred_dir: str | Path, scene_id: int, im_id: int) -> dict[str, np.ndarray]:
+    """Read one prediction file; returns ``masks`` (N,H,W) bool, ``labels`` (N,) int32 obj ids, ``scores``.
+
+    Raises:
+        DatasetError: the file is missing or malformed.
+    """
+    path = pred_path(pred_dir, scene_id, im_id)
+    if not path.is_file():
+        raise DatasetError(f"{path}: no prediction for scene {scene_id} image {im_id}")
+    try:
+        with np.load(path) as z:
+            out = {k: z[k] for k in ("masks", "labels", "scores")}
+    except Exception as e:  # noqa: BLE001
+        raise DatasetError(f"{path}: unreadable prediction file ({e})") from None
+    n = len(out["labels"])
+    if out["masks"].ndim != 3 or out["masks"].shape[0] != n or out["scores"].shape != (n,):
+        raise DatasetError(f"{path}: inconsistent arrays {[(k, v.shape) for k, v in out.items()]}")
+    return out
+
+
+def coco_image_id(scene_id: int, im_id: int) -> int:
+    """COCO ``image_id`` of an image, shared by the ground truth and the results: ``scene*10^6 + im``."""
+    return int(scene_id) * 1_000_000 + int(im_id)
+
+
+def encode_rle(mask: np.ndarray) -> dict:
+    """COCO RLE of a bool (H, W) mask, with ``counts`` as a str (JSON-serialisable)."""
+    from pycocotools import mask as mask_util
+
+    rle = mask_util.encode(np.asfortranarray(mask.astype(np.uint8)))
+    rle["counts"] = rle["counts"].decode("ascii")
+    return rle
+
+
+class Segmenter:
+    """A trained Mask R-CNN ready for inference.
+
+    Args:
+        ckpt: a run directory (its ``model.pt``, else ``last.pt``) or a checkpoint file.
+        device: ``cpu``/``cuda``/``auto`` (default: the GPU when present).
+        score_thresh: override the run's minimum detection score.
+    Raises:
+        CheckpointError: the checkpoint is missing, corrupt or does not fit its config.
+    """
+
+    def __init__(self, ckpt: str | Path, device: str | None = None, score_thresh: float | None = None):
+        c = ck.load(ckpt)
+        self.path = ck.resolve(ckpt)
+        try:
+            cfg = SegConfig.from_dict(c["config"])
+            if score_thresh is not None:
+                cfg = cfg.replace(score_thresh=float(score_thresh))
+            classes = ClassMap.from_list(c["classes"])
+            model, _ = build_model(cfg, len(classes), init=c.get("init", "random"))
+            model.load_state_dict(c["model"])
+        except (ValueError, TypeError, KeyError, RuntimeError, IndexError) as e:
+            raise ck.CheckpointError(
+                f"{self.path}: incompatible checkpoint ({str(e).strip().splitlines()[0][:300]})"
+            ) from None
+        self.cfg, self.classes, self.epoch, self.init = cfg, classes, int(c["epoch"]), c.get("init", "?")
+        self.device = pick_device(device)
+        self.model = model.to(self.device).eval()
+        set_train_sizes(self.model, cfg, training=False)
+        self._lut = classes.obj_id_array()
+
+    @torch.inference_mode()
+    def predict(self, rgbs: list[np.ndarray], mask_thresh: float = 0.5) -> list[dict[str, np.ndarray]]:
+        """Segment a batch of (H, W, 3) uint8 images.
+
+        Returns:
+            Per image ``{"masks": (N,H,W) bool at the input resolution, "labels": (N,) int32 obj ids,
+            "scores": (N,) float32, "boxes": (N,4) float32 x0,y0,x1,y1}``, sorted by decreasing score.
+        """
+        ims = [
+            torch.from_numpy(np.ascontiguousarray(r[..., :3])).to(self.device).permute(2, 0, 1).float().div_(255.0)
+            for r in rgbs
+        ]
+        use_amp = self.cfg.amp and self.device.type == "cuda"
+        with torch.autocast("cuda", dtype=torch.float16) if use_amp else nullcontext():
+            outs = self.model(ims)
+        res = []
+        for o, r in zip(outs, rgbs):
+            scores = o["scores"].float().cpu().numpy().astype(np.float32)
+            order = np.argsort(-scores, kind="stable")
+            masks = (o["masks"][:, 0] > mask_thresh).cpu().numpy()[order] if len(order) else np.zeros((0,) + r.shape[:2], bool)
+            labels = self._lut[o["labels"].cpu().numpy()[order]].astype(np.int32)
+            res.append({
+                "masks": masks.astype(bool, copy=False),
+                "labels": labels,
+                "scores": scores[order],
+                "boxes": o["boxes"].float().cpu().numpy()[order].astype(np.float32),
+            })
+        return res
+
+
+def _write_npz(path: Path, pred: dict) -> None:
+    tmp = path.with_name(path.name[:-4] + ".tmp.npz")
+    np.savez_compressed(tmp, masks=pred["masks"], labels=pred["labels"], scores=pred["scores"])
+    tmp.replace(path)
+
+
+class _Images(torch.utils.data.Dataset):
+    def __init__(self, ds, indices):
+        self.ds, self.indices = ds, indices
+
+    def __len__(self):
+        return len(self.indices)
+
+    def __getitem__(self, i):
+        s = self.ds[self.indices[i]]
+        return s.scene_id, s.im_id, s.rgb
+
+
+def segment(
+    data: str | Path,
+    ckpt: str | Path,
+    out: str | Path,
+    *,
+    split: str = "test",
+    subset: str = "all",
+    batch_size: int = 4,
+    device: str | None = None,
+    score_thresh: float | None = None,
+    num_workers: int = 0,
+    progress: bool = True,
+) -> dict:
+    """Segment every image of a dataset (or of the run's train/test subset) and write ``out``.
+
+    Args:
+        data: dataset directory.
+        ckpt: run directory or checkpoint file.
+        out: prediction directory (created; existing prediction files are overwritten).
+        split: BOP split to read (ignored for the synthetic layout) when ``subset == "all"``.
+        subset: ``all`` images of ``data``/``split``, or the run's ``train`` / ``test`` images
+            (needs ``ckpt`` to be a run directory with ``split.json``).
+        batch_size: images per forward pass.
+        device: ``cpu``/``cuda``/``auto``.
+        score_thresh: minimum score kept (default: the run's ``score_thresh``, 0.05).
+        num_workers: image-loading worker processes.
+        progress: show a progress bar.
+    Returns:
+        ``{"images": n, "detections": n, "seconds": s, "images_per_s": r, "pred_dir": str}``.
+    Raises:
+        CheckpointError, DatasetError (incl. a checkpoint trained on other objects than the dataset's).
+    """
+    seg = Segmenter(ckpt, device=device, score_thresh=score_thresh)
+    if subset == "all":
+        ds = open_dataset(data, split=split)
+        indices = list(range(len(ds)))
+        reader_split = split
+    elif subset in ("train", "test"):
+        split_file = Path(ckpt) / "split.json"
+        if not split_file.is_file():
+            raise DatasetError(f"{split_file}: --subset {subset} needs --ckpt to be a run directory with split.json")
+        record = json.loads(split_file.read_text())
+        ds, indices = open_part(data, record, subset)
+        reader_split = record[subset]["split"]
+    else:
+        raise ValueError(f"subset must be all, train or test, not {subset!r}")
+    seg.classes.check_compatible(ds)
+    missing = sorted(set(int(k) for k in ds.object_ids) - set(seg.classes.obj_ids))
+    if missing:
+        log.warning("objects of the dataset the checkpoint was not trained on (never predicted): %s", missing)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    loader = torch.utils.data.DataLoader(
+        _Images(ds, indices), batch_size=batch_size, num_workers=num_workers, collate_fn=lambda b: list(zip(*b))
+    )
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(indices), desc="segment", leave=False, dynamic_ncols=True)
+    results, images, n_det = [], [], 0
+    t_model = 0.0
+    for scene_ids, im_ids, rgbs in loader:
+        t0 = time.perf_counter()
+        preds = seg.predict(list(rgbs))
+        t_model += time.perf_counter() - t0
+        for s, i, rgb, p in zip(scene_ids, im_ids, rgbs, preds):
+            _write_npz(pred_path(out, s, i), p)
+            images.append([int(s), int(i), int(rgb.shape[0]), int(rgb.shape[1])])
+            n_det += len(p["labels"])
+            for m, lab, sc, bx in zip(p["masks"], p["labels"], p["scores"], p["boxes"]):
+                results.append({
+                    "image_id": coco_image_id(s, i),
+                    "category_id": int(lab),
+                    "segmentation": encode_rle(m),
+                    "bbox": [float(bx[0]), float(bx[1]), float(bx[2] - bx[0]), float(bx[3] - bx[1])],
+                    "score": float(sc),
+                })
+        if bar is not None:
+            bar.update(len(rgbs))
+    if bar is not None:
+        bar.close()
+    write_json(out / "coco_results.json", results)
+    meta = {
+        "checkpoint": str(seg.path.resolve()),
+        "epoch": seg.epoch,
+        "classes": seg.classes.to_list(),
+        "score_thresh": seg.cfg.score_thresh,
+        "data": str(Path(data).resolve()),
+        "split": reader_split,  # reader split (BOP split directory; ignored by the synthetic layout)
+        "subset": subset,
+        "images": images,
+        "format": "npz per image: masks (N,H,W) bool, labels (N,) int32 obj_id, scores (N,) float32",
+    }
+    write_json(out / "meta.json", meta)
+    return {
+        "images": len(images),
+        "detections": n_det,
+        "seconds": t_model,
+        "images_per_s": len(images) / t_model if t_model > 0 else float("nan"),
+        "pred_dir": str(out),
+    }

@@ -1,0 +1,134 @@
+"""Mask R-CNN construction (torchvision) from a :class:`~.config.SegConfig`.
+
+With the ``paper`` config (ResNet-50, 256 FPN channels, default heads) the network is exactly
+torchvision's ``maskrcnn_resnet50_fpn`` with ``num_classes = n_objects + 1`` and
+``trainable_backbone_layers=5``. Pretrained ImageNet weights are taken from the local torch hub cache
+only (``$TORCH_HOME/hub/checkpoints``); this module never downloads anything.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections import OrderedDict
+
+import torch
+from torch import nn
+
+from .config import SegConfig
+
+log = logging.getLogger(__name__)
+
+
+def _weights_enum(backbone: str):
+    from torchvision.models import ResNet18_Weights, ResNet34_Weights, ResNet50_Weights
+
+    return {
+        "resnet18": ResNet18_Weights.IMAGENET1K_V1,
+        "resnet34": ResNet34_Weights.IMAGENET1K_V1,
+        "resnet50": ResNet50_Weights.IMAGENET1K_V1,
+    }[backbone]
+
+
+def cached_weights_path(backbone: str) -> str:
+    """Where torchvision's ImageNet weights of ``backbone`` live in the local torch hub cache."""
+    url = _weights_enum(backbone).url
+    return os.path.join(torch.hub.get_dir(), "checkpoints", os.path.basename(url))
+
+
+def build_model(cfg: SegConfig, num_classes: int, *, init: str | None = None) -> tuple[nn.Module, str]:
+    """Build a torchvision ``MaskRCNN`` for ``num_classes`` object classes (+ background).
+
+    Args:
+        cfg: the run configuration.
+        num_classes: number of object classes, background excluded.
+        init: ``None`` to initialise a new model: ImageNet backbone weights from the local cache when
+            ``cfg.pretrained`` and the file is there (a missing file is reported in one line on the
+            ``sixdpose`` logger, and the backbone starts from random initialisation); or the ``init``
+            recorded in a checkpoint (``"imagenet"``/``"random"``) to rebuild the same layout without
+            loading anything (the weights come from the checkpoint).
+    Returns:
+        ``(model, init)`` where ``init`` is ``"imagenet"`` or ``"random"``. As in torchvision, an
+        ImageNet-initialised backbone keeps its BatchNorm statistics frozen; a randomly initialised one
+        trains them (``BatchNorm2d``).
+    """
+    import torchvision
+    from torchvision.models.detection import MaskRCNN
+    from torchvision.models.detection.anchor_utils import AnchorGenerator
+    from torchvision.models.detection.backbone_utils import BackboneWithFPN
+    from torchvision.models.detection.faster_rcnn import FastRCNNPredictor, TwoMLPHead
+    from torchvision.models.detection.mask_rcnn import MaskRCNNHeads, MaskRCNNPredictor
+    from torchvision.ops import misc as misc_nn_ops
+    from torchvision.ops.feature_pyramid_network import LastLevelMaxPool
+
+    if num_classes < 1:
+        raise ValueError("num_classes must be >= 1")
+    weights = None
+    if init is None:
+        init = "random"
+        if cfg.pretrained:
+            path = cached_weights_path(cfg.backbone)
+            if os.path.isfile(path):
+                weights = _weights_enum(cfg.backbone)
+                init = "imagenet"
+            else:
+                logging.getLogger("sixdpose").warning(
+                    "ImageNet weights for %s not in the local torch hub cache (%s); offline, so training "
+                    "starts from random initialisation",
+                    cfg.backbone,
+                    path,
+                )
+    elif init not in ("imagenet", "random"):
+        raise ValueError(f"init must be 'imagenet' or 'random', not {init!r}")
+    norm_layer = misc_nn_ops.FrozenBatchNorm2d if init == "imagenet" else nn.BatchNorm2d
+    resnet = getattr(torchvision.models, cfg.backbone)(weights=weights, norm_layer=norm_layer)
+
+    layers_to_train = ["layer4", "layer3", "layer2", "layer1", "conv1"][: cfg.trainable_layers]
+    if cfg.trainable_layers == 5:
+        layers_to_train.append("bn1")
+    for name, p in resnet.named_parameters():
+        if not any(name.startswith(layer) for layer in layers_to_train):
+            p.requires_grad_(False)
+    stage2 = resnet.inplanes // 8
+    in_channels = [stage2 * 2 ** (i - 1) for i in (1, 2, 3, 4)]
+    return_layers = OrderedDict((f"layer{k}", str(v)) for v, k in enumerate((1, 2, 3, 4)))
+    backbone = BackboneWithFPN(resnet, return_layers, in_channels, cfg.fpn_channels, extra_blocks=LastLevelMaxPool())
+
+    n = num_classes + 1
+    C = cfg.fpn_channels
+    res = 7  # RoIAlign output of the box branch (torchvision default)
+    box_head = TwoMLPHead(C * res * res, cfg.box_head_dim)
+    box_predictor = FastRCNNPredictor(cfg.box_head_dim, n)
+    mask_head = MaskRCNNHeads(C, [cfg.mask_head_channels] * 4, 1)
+    mask_predictor = MaskRCNNPredictor(cfg.mask_head_channels, cfg.mask_head_channels, n)
+    anchor_gen = AnchorGenerator(tuple((a,) for a in cfg.anchor_sizes), ((0.5, 1.0, 2.0),) * len(cfg.anchor_sizes))
+    model = MaskRCNN(
+        backbone,
+        rpn_anchor_generator=anchor_gen,
+        num_classes=None,
+        min_size=cfg.min_size,
+        max_size=cfg.max_size,
+        rpn_pre_nms_top_n_train=cfg.rpn_pre_nms_train,
+        rpn_post_nms_top_n_train=cfg.rpn_post_nms_train,
+        rpn_pre_nms_top_n_test=cfg.rpn_pre_nms_test,
+        rpn_post_nms_top_n_test=cfg.rpn_post_nms_test,
+        rpn_batch_size_per_image=cfg.rpn_batch_size,
+        box_batch_size_per_image=cfg.box_batch_size,
+        box_detections_per_img=cfg.detections_per_img,
+        box_score_thresh=cfg.score_thresh,
+        box_head=box_head,
+        box_predictor=box_predictor,
+        mask_head=mask_head,
+        mask_predictor=mask_predictor,
+    )
+    return model, init
+
+
+def set_train_sizes(model: nn.Module, cfg: SegConfig, training: bool) -> None:
+    """Switch the model's resize between multi-scale training sizes and the fixed test size.
+
+    torchvision draws the shorter side at random from ``transform.min_size`` in training mode and
+    uses its last entry at evaluation, so the tuple is swapped rather than relying on that detail.
+    """
+    m = model.module if hasattr(model, "module") else model
+    m.transform.min_size = tuple(cfg.train_min_sizes) if training else (cfg.min_size,)

@@ -1,0 +1,104 @@
+"""BOP reader (ycbv_sample with depth and masks, lmo without) and export-bop round trip."""
+
+import json
+
+import numpy as np
+import pytest
+
+from sixdpose.cli import main
+from sixdpose.datasets.base import DatasetError, open_dataset
+from sixdpose.datasets.bop import BopDataset
+from test_reg_helpers import LMO, YCBV, write_synthetic_dataset
+
+needs_ycbv = pytest.mark.skipif(not YCBV.is_dir(), reason="shared/data/ycbv_sample not available")
+needs_lmo = pytest.mark.skipif(not LMO.is_dir(), reason="shared/data/lmo not available")
+
+
+@needs_ycbv
+def test_ycbv_sample_reads_in_metres():
+    ds = open_dataset(YCBV, split="train_real")
+    assert isinstance(ds, BopDataset)
+    assert len(ds) == 40 and ds.has_depth and ds.has_masks
+    s = ds[0]
+    assert (s.scene_id, s.im_id) == ds.keys()[0]
+    assert s.rgb.shape == (480, 640, 3) and s.rgb.dtype == np.uint8
+    assert s.depth.dtype == np.float32 and 0.3 < np.median(s.depth[s.depth > 0]) < 2.0  # metres
+    assert [i.obj_id for i in s.instances] == [8, 14, 21]
+    inst = s.instances[0]
+    assert inst.mask.dtype == bool and inst.mask.sum() == inst.px_visib
+    assert 0.3 < inst.t[2] < 1.5  # mm -> m
+    np.testing.assert_allclose(inst.R @ inst.R.T, np.eye(3), atol=1e-5)
+    # the object's depth under its mask is close to its translation (metres everywhere)
+    assert abs(np.median(s.depth[inst.mask & (s.depth > 0)]) - inst.t[2]) < 0.1
+    m = ds.model(8)
+    assert m.points.shape[1] == 3 and m.normals is not None
+    assert 0.05 < m.diameter < 0.2 and np.ptp(m.points[:, 0]) < m.diameter
+    assert m.symmetric is False  # no symmetry annotations in this sample
+    assert BopDataset(YCBV, "train_real", symmetric_ids=[21]).model(21).symmetric
+
+
+@needs_lmo
+def test_lmo_without_depth_and_masks():
+    ds = open_dataset(LMO, split="test")
+    assert len(ds) == 30 and not ds.has_depth and not ds.has_masks
+    s = ds[0]
+    assert s.depth is None and all(i.mask is None for i in s.instances)
+    assert all(i.px_visib >= 0 for i in s.instances)  # from scene_gt_info.json
+    assert ds.model(10).symmetric and ds.model(11).symmetric and not ds.model(1).symmetric
+    assert ds.model(1).colors is not None
+
+
+@needs_lmo
+def test_register_without_depth_fails_with_one_line(tmp_path, capsys):
+    rc = main(["register", "--data", str(LMO), "--method", "ransac", "--out", str(tmp_path / "r.csv"), "--no-progress"])
+    assert rc == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no depth" in err[0]
+    assert not (tmp_path / "r.csv").exists()
+
+
+def test_bop_errors_name_the_file(tmp_path):
+    (tmp_path / "models").mkdir()
+    (tmp_path / "models" / "models_info.json").write_text("{not json")
+    with pytest.raises(DatasetError, match="models_info.json"):
+        BopDataset(tmp_path, "test")
+    (tmp_path / "models" / "models_info.json").write_text(json.dumps({"1": {"diameter": 10.0}}))
+    with pytest.raises(DatasetError, match="split 'test' not found"):
+        BopDataset(tmp_path, "test")
+    sd = tmp_path / "test" / "000001"
+    sd.mkdir(parents=True)
+    (sd / "scene_gt.json").write_text(json.dumps({"0": [{"obj_id": 1, "cam_R_m2c": [1, 0], "cam_t_m2c": [0, 0, 1]}]}))
+    (sd / "scene_camera.json").write_text(json.dumps({"0": {"cam_K": [1, 0, 0, 0, 1, 0, 0, 0, 1], "depth_scale": 1}}))
+    ds = BopDataset(tmp_path, "test")
+    assert not ds.has_depth
+    with pytest.raises(DatasetError, match="rgb"):
+        ds[0]
+
+
+def test_export_bop_round_trip(tmp_path):
+    src = write_synthetic_dataset(tmp_path / "syn", n_images=3)
+    a = open_dataset(src)
+    rc = main(["export-bop", "--data", str(src), "--out", str(tmp_path / "bop")])
+    assert rc == 0
+    b = open_dataset(tmp_path / "bop", split="test")
+    assert isinstance(b, BopDataset) and sorted(b.keys()) == sorted(a.keys())
+    info = json.loads((tmp_path / "bop" / "models" / "models_info.json").read_text())
+    assert set(info) == {"15"} and info["15"]["diameter"] == pytest.approx(a.model(15).diameter * 1000)
+    for i, key in enumerate(a.keys()):
+        sa, sb = a[i], b.load_key(*key)
+        assert (sa.scene_id, sa.im_id) == (sb.scene_id, sb.im_id)
+        np.testing.assert_array_equal(sa.rgb, sb.rgb)
+        np.testing.assert_allclose(sb.depth, sa.depth, atol=1e-4)  # 0.1 mm depth unit
+        assert ((sb.depth > 0) == (sa.depth > 0)).all()
+        np.testing.assert_allclose(sb.K, sa.K)
+        assert len(sa.instances) == len(sb.instances)
+        for ia, ib in zip(sa.instances, sb.instances):
+            assert (ia.obj_name, ia.obj_id, ia.inst, ia.px_visib) == (ib.obj_name, ib.obj_id, ib.inst, ib.px_visib)
+            np.testing.assert_allclose(ib.R, ia.R, atol=1e-12)
+            np.testing.assert_allclose(ib.t, ia.t, atol=1e-9)
+            np.testing.assert_array_equal(ib.mask, ia.mask)
+    ma, mb = a.model(15), b.model(15)
+    np.testing.assert_allclose(mb.points, ma.points, atol=1e-6)
+    assert mb.diameter == pytest.approx(ma.diameter) and mb.symmetric == ma.symmetric
+    # a second export into the same directory is refused
+    assert main(["export-bop", "--data", str(src), "--out", str(tmp_path / "bop")]) == 2

@@ -1,0 +1,273 @@
+"""Generator: layout, exact ground truth, determinism, resume, Ray, bad input (issue: foundation)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from conftest import REPO, tree_digest
+from sixdpose.constants import MERGED_MASK_CODES, TARGET_OBJECTS
+
+pytestmark = pytest.mark.slow
+
+
+def _cli(*args, **kw):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.run([sys.executable, "-m", "sixdpose.cli", *args], capture_output=True, text=True, env=env, **kw)
+
+
+def test_layout(tiny_dataset, smoke_config):
+    d = tiny_dataset
+    n = smoke_config.scenes * smoke_config.views
+    for sub, ext in (("RGB", "png"), ("depth", "npy"), ("merged_masks", "png")):
+        assert sorted(int(p.stem) for p in (d / sub).glob(f"*.{ext}")) == list(range(n)), sub
+    gt = yaml.safe_load((d / "gt.yml").read_text())
+    assert sorted(gt) == list(range(n))
+    info = yaml.safe_load((d / "models" / "models_info.yml").read_text())
+    assert list(info) == sorted(TARGET_OBJECTS) and len(info) == 18
+    for name, v in info.items():
+        assert (d / "models" / f"{name}.ply").is_file()
+        assert v["diameter"] > max(v["size_x"], v["size_y"], v["size_z"]) * 0.99
+        assert v["obj_id"] == TARGET_OBJECTS.index(name) + 1
+    assert "YCB Object and Model Set" in (d / "ATTRIBUTION.txt").read_text()
+    man = json.loads((d / "manifest.json").read_text())
+    assert man["seed"] == smoke_config.seed and man["generator"].startswith("sixdpose")
+    assert len(man["scenes"]) == smoke_config.scenes and man["num_images"] == n
+    seen_instances = 0
+    from PIL import Image
+
+    for im_id, entry in gt.items():
+        rgb = np.asarray(Image.open(d / "RGB" / f"{im_id}.png"))
+        assert rgb.shape == (480, 640, 3) and rgb.dtype == np.uint8
+        depth = np.load(d / "depth" / f"{im_id}.npy")
+        assert depth.dtype == np.float32 and depth.shape == (480, 640)
+        assert np.isfinite(depth).all() and (depth >= 0).all() and (depth > 0).mean() > 0.5
+        K = np.asarray(entry["cam_K"])
+        assert K.shape == (3, 3)
+        merged = np.asarray(Image.open(d / "merged_masks" / f"{im_id}.png"))
+        expect = np.zeros_like(merged)
+        for o in entry["objects"]:
+            assert o["obj_name"] in TARGET_OBJECTS and 0 <= o["inst"] < 4
+            R = np.asarray(o["R"])
+            assert R.shape == (3, 3) and np.allclose(R @ R.T, np.eye(3), atol=1e-9) and np.linalg.det(R) > 0
+            m = np.asarray(Image.open(d / "masks" / o["obj_name"] / f"{im_id}_{o['inst']}.png")) > 0
+            assert m.sum() == o["px_visib"] > 0
+            assert not (expect[m] > 0).any(), "visible masks overlap"
+            expect[m] = MERGED_MASK_CODES[o["obj_name"]] - o["inst"]
+            assert np.linalg.norm(o["t"]) < 10
+            seen_instances += 1
+        assert (merged == expect).all()
+    assert seen_instances > 5
+    # every mask file belongs to a gt entry
+    n_masks = len(list((d / "masks").rglob("*.png")))
+    assert n_masks == sum(len(e["objects"]) for e in gt.values())
+
+
+def test_gt_exact(tiny_dataset, ycb_dir):
+    """Back-projected masked depth lies on the model surface at the GT pose (< 1 mm mean)."""
+    from sixdpose.generation.checks import gt_surface_errors
+
+    errs = gt_surface_errors(tiny_dataset, ycb_dir)
+    assert len(errs) > 5
+    means = np.array([e["mean"] for e in errs])
+    assert means.max() < 1e-3, f"worst mean point-to-surface error {means.max() * 1000:.3f} mm"
+
+
+def test_principal_point_convention(tiny_dataset, ycb_dir, smoke_config):
+    """Drake's CameraInfo centre (w/2 - 0.5) is half a pixel off in the integer-centre convention:
+    our K uses w/2 - 1, and the raw value gives a clearly larger back-projection error."""
+    from pydrake.systems.sensors import CameraInfo
+
+    from sixdpose.datasets.synthetic import SyntheticDataset
+    from sixdpose.generation.sim import intrinsics
+
+    K = intrinsics(smoke_config)
+    assert K[0, 2] == 640 / 2 - 1 and K[1, 2] == 480 / 2 - 1
+    info = CameraInfo(640, 480, np.deg2rad(smoke_config.camera.fov_y_deg))
+    assert np.isclose(K[0, 0], info.focal_x()) and info.center_x() == 319.5
+
+    import open3d as o3d
+
+    from sixdpose.assets import load_catalog, load_mesh
+    from sixdpose.generation.checks import backproject
+
+    ds = SyntheticDataset(tiny_dataset)
+    s = ds[0]
+    inst = max(s.instances, key=lambda i: i.px_visib)
+    m = load_mesh(load_catalog(ycb_dir)[inst.obj_name].obj_path, with_texture=False)
+    rs = o3d.t.geometry.RaycastingScene()
+    rs.add_triangles(o3d.core.Tensor(m.vertices.astype(np.float32)), o3d.core.Tensor(m.faces.astype(np.uint32)))
+
+    def err(Kx):
+        p = (backproject(s.depth, Kx, inst.mask) - inst.t) @ inst.R
+        return float(rs.compute_distance(o3d.core.Tensor(p.astype(np.float32))).numpy().mean())
+
+    K_raw = K.copy()
+    K_raw[0, 2], K_raw[1, 2] = info.center_x(), info.center_y()
+    assert err(K) < 1e-4 < err(K_raw)
+
+
+def test_resting_contact(tiny_dataset, ycb_dir):
+    """Objects rest on the table without sinking into it or (beyond a few mm) into each other."""
+    from sixdpose.generation.checks import resting_penetrations
+
+    r = resting_penetrations(tiny_dataset, ycb_dir)
+    assert r["table"] < 2e-3, r
+    assert r["pairs"] < 1e-2, r
+    man = json.loads((tiny_dataset / "manifest.json").read_text())
+    for scene in man["scenes"].values():
+        assert scene["sim_time"] <= 5.0 + 1e-9
+
+
+def test_workers_identical(tiny_dataset, tmp_path, ycb_dir, smoke_config):
+    from sixdpose.generation import generate
+
+    out = tmp_path / "w2"
+    generate(out, smoke_config, workers=2, assets=ycb_dir, progress=False)
+    assert tree_digest(out) == tree_digest(tiny_dataset)
+
+
+def test_ray_executor(tiny_dataset, tmp_path, ycb_dir, smoke_config):
+    pytest.importorskip("ray")
+    from sixdpose.generation import generate
+
+    out = tmp_path / "ray"
+    res = generate(out, smoke_config, workers=2, assets=ycb_dir, executor="ray", progress=False)
+    assert res["scenes_done"] == smoke_config.scenes
+    assert tree_digest(out) == tree_digest(tiny_dataset)
+
+
+def test_kill_and_resume(tiny_dataset, tmp_path, ycb_dir):
+    out = tmp_path / "killed"
+    args = [sys.executable, "-m", "sixdpose.cli", "generate", "--profile", "smoke", "--out", str(out),
+            "--assets", str(ycb_dir), "--workers", "1", "--no-progress"]
+    proc = subprocess.Popen(args, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 300
+    while not (out / ".scenes" / "000000.json").exists():
+        assert proc.poll() is None, "generator exited before the first scene"
+        assert time.time() < deadline
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not (out / "gt.yml").exists()  # the dataset is not complete: no gt.yml yet
+    r = _cli("generate", "--profile", "smoke", "--out", str(out), "--assets", str(ycb_dir), "--no-progress")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads(r.stdout.strip().splitlines()[-1])
+    assert summary["resumed"] and summary["scenes_done"] == 1  # only the missing scene was redone
+    assert tree_digest(out) == tree_digest(tiny_dataset)
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--views", "0"], "--views must be >= 1"),
+        (["--scenes", "-2"], "--scenes must be >= 0"),
+        (["--workers", "0"], "--workers must be >= 1"),
+        (["--seed", "-1"], "--seed must be >= 0"),
+        (["--assets", "/nonexistent/ycb"], "YCB asset directory not found"),
+        (["--scenes", "x"], "expected an integer"),
+    ],
+)
+def test_bad_arguments(tmp_path, ycb_dir, extra, message):
+    out = tmp_path / "out"
+    args = ["generate", "--profile", "smoke", "--out", str(out)]
+    if "--assets" not in extra:
+        args += ["--assets", str(ycb_dir)]
+    r = _cli(*args, *extra)
+    assert r.returncode == 2
+    assert message in r.stderr and len(r.stderr.strip().splitlines()) <= 2
+    assert not out.exists()
+
+
+def test_missing_object(tmp_path, ycb_dir):
+    """An asset directory lacking a target object, or a model file, is refused in one line."""
+    assets = tmp_path / "ycb"
+    assets.mkdir()
+    rows = (ycb_dir / "objects.csv").read_text().splitlines()
+    keep = [rows[0]] + [r for r in rows[1:] if not r.startswith("055_baseball")]
+    (assets / "objects.csv").write_text("\n".join(keep) + "\n")
+    for r in keep[1:]:
+        (assets / r.split(",")[0]).symlink_to(ycb_dir / r.split(",")[0])
+    out = tmp_path / "out"
+    res = _cli("generate", "--profile", "smoke", "--out", str(out), "--assets", str(assets))
+    assert res.returncode == 2 and "055_baseball" in res.stderr and not out.exists()
+    # listed in objects.csv but its mesh is missing
+    (assets / "objects.csv").write_text("\n".join(rows) + "\n")
+    res = _cli("generate", "--profile", "smoke", "--out", str(out), "--assets", str(assets))
+    assert res.returncode == 2 and "055_baseball" in res.stderr and "missing model file" in res.stderr
+    assert not out.exists()
+
+
+def test_foreign_or_mismatched_output(tmp_path, ycb_dir, tiny_dataset):
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine")
+    r = _cli("generate", "--profile", "smoke", "--out", str(foreign), "--assets", str(ycb_dir))
+    assert r.returncode == 2 and "not a sixdpose dataset" in r.stderr
+    assert sorted(p.name for p in foreign.iterdir()) == ["notes.txt"]
+    # an existing dataset with another config is refused, untouched
+    before = tree_digest(tiny_dataset)
+    r = _cli("generate", "--profile", "smoke", "--views", "5", "--out", str(tiny_dataset), "--assets", str(ycb_dir))
+    assert r.returncode == 2 and "different config" in r.stderr and "views" in r.stderr
+    assert tree_digest(tiny_dataset) == before
+    # a file where the directory should be
+    f = tmp_path / "afile"
+    f.write_text("x")
+    r = _cli("generate", "--profile", "smoke", "--out", str(f / "sub"), "--assets", str(ycb_dir))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root ignores directory permissions")
+def test_unwritable_output(tmp_path, ycb_dir):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    r = _cli("generate", "--profile", "smoke", "--out", str(ro / "ds"), "--assets", str(ycb_dir))
+    assert r.returncode == 2 and "permission" in r.stderr
+    ro.chmod(0o755)
+
+
+def test_scene_sampling_rules(ycb_dir):
+    """Counts per scene follow section III-B: 5-20 targets, 5-10 noise objects, <= 4 of one object."""
+    from sixdpose.assets import load_catalog
+    from sixdpose.generation import profile
+    from sixdpose.generation.scene import default_pools, draw_objects, scene_rng
+
+    cfg = profile("paper")
+    targets, noise = default_pools(load_catalog(ycb_dir))
+    for s in range(300):
+        objs = draw_objects(scene_rng(0, s), cfg, targets, noise)
+        nt = sum(r == "target" for _, r in objs)
+        nn = sum(r == "noise" for _, r in objs)
+        assert 5 <= nt <= 20 and 5 <= nn <= 10
+        names = [n for n, _ in objs]
+        assert max(names.count(n) for n in set(names)) <= 4
+        assert all(n in targets for n, r in objs if r == "target") and all(n in noise for n, r in objs if r == "noise")
+
+
+def test_camera_arc_looks_at_table():
+    from sixdpose.generation import profile
+    from sixdpose.generation.scene import camera_arc, scene_rng
+
+    cfg = profile("paper")
+    for s in range(50):
+        poses = camera_arc(scene_rng(1, s), cfg)
+        assert len(poses) == 20
+        for X in poses:
+            R = X[:3, :3]
+            assert np.allclose(R @ R.T, np.eye(3), atol=1e-9) and np.isclose(np.linalg.det(R), 1)
+            # optical axis hits the table top within the jitter box
+            p, z = X[:3, 3], R[:, 2]
+            lam = (cfg.table_height - p[2]) / z[2]
+            hit = p + lam * z
+            assert lam > 0 and abs(hit[0]) <= 0.25 + 1e-9 and abs(hit[1]) <= 0.2 + 1e-9
+            assert p[2] > cfg.table_height

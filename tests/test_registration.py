@@ -1,0 +1,224 @@
+"""Geometry, the three methods (+ ICP), the register runner / CLI and the evaluate CLI."""
+
+import csv
+
+import numpy as np
+import pytest
+
+from sixdpose.cli import main
+from sixdpose.datasets.base import DatasetError, open_dataset
+from sixdpose.evaluation.evaluate import Estimate, evaluate, load_results
+from sixdpose.registration import geometry
+from sixdpose.registration.geometry import ReferenceCache, backproject
+from sixdpose.registration.methods import estimate_pose
+from sixdpose.registration.presets import PRESETS, get_preset
+from sixdpose.registration.runner import load_predicted_masks, run_registration, write_results
+from test_reg_helpers import K_SMALL, YCBV, write_synthetic_dataset
+
+needs_ycbv = pytest.mark.skipif(not YCBV.is_dir(), reason="shared/data/ycbv_sample not available")
+
+
+@pytest.fixture(scope="module")
+def syn(tmp_path_factory):
+    return write_synthetic_dataset(tmp_path_factory.mktemp("syn") / "d", n_images=3)
+
+
+def test_backproject_matches_pinhole_loop():
+    rng = np.random.default_rng(0)
+    depth = rng.uniform(0.4, 1.0, (6, 8)).astype(np.float32)
+    depth[0, 0] = 0.0
+    depth[1, 1] = np.nan
+    mask = np.ones_like(depth, bool)
+    mask[2, 3] = False
+    rgb = rng.integers(0, 255, (6, 8, 3), dtype=np.uint8)
+    K = np.array([[100.0, 0, 3.5], [0, 110.0, 2.5], [0, 0, 1]])
+    pts, col, pix = backproject(depth, K, mask, rgb)
+    ref = []
+    for v in range(6):
+        for u in range(8):
+            z = depth[v, u]
+            if mask[v, u] and np.isfinite(z) and z > 0:
+                ref.append([(u - 3.5) * z / 100.0, (v - 2.5) * z / 110.0, z])
+    np.testing.assert_allclose(pts, np.array(ref), rtol=1e-6)
+    assert len(pts) == 6 * 8 - 3
+    np.testing.assert_allclose(col * 255, rgb[pix[:, 0], pix[:, 1]])
+    # reprojection gives back the pixel
+    uv = (K @ (pts / pts[:, 2:]).T).T
+    np.testing.assert_allclose(uv[:, :2], pix[:, ::-1], atol=1e-6)
+    with pytest.raises(ValueError, match="mask shape"):
+        backproject(depth, K, np.ones((2, 2), bool))
+
+
+def test_normals_face_the_camera():
+    # a tilted plane in front of the camera
+    x, y = np.meshgrid(np.linspace(-0.1, 0.1, 30), np.linspace(-0.1, 0.1, 30))
+    pts = np.c_[x.ravel(), y.ravel(), 0.8 + 0.3 * x.ravel()]
+    pcd = geometry.estimate_normals(geometry.to_o3d(pts), knn=10)
+    n = np.asarray(pcd.normals)
+    assert (n[:, 2] < 0).all()
+    true = np.array([0.3, 0.0, -1.0]) / np.linalg.norm([0.3, 0, -1])
+    assert np.degrees(np.arccos(np.clip(n @ true, -1, 1))).max() < 2.0
+
+
+def test_reference_cache_reuses_and_downsamples(syn):
+    ds = open_dataset(syn)
+    cache = ReferenceCache(ds)
+    r1, t1 = cache.get(15, 0.005, 0.025)
+    r2, t2 = cache.get(15, 0.005, 0.025)
+    assert r1 is r2 and t1 > 0 and t2 == 0.0
+    assert len(r1.points) < len(ds.model(15).points) and r1.fpfh.data.shape == (33, len(r1.points))
+    np.testing.assert_allclose(np.linalg.norm(r1.normals, axis=1), 1.0, atol=1e-6)
+
+
+@pytest.fixture(scope="module")
+def views(syn):
+    """Three full-resolution (640x480) renders of the test object at known poses."""
+    from test_reg_helpers import look_pose, make_shape, render_depth
+
+    P, N, _, _ = make_shape(0.0006, 1)
+    K = np.array([[600.0, 0, 319.5], [0, 600.0, 239.5], [0, 0, 1]])
+    out = []
+    for k in (0, 2, 3):
+        R, t = look_pose(k, (0.0, 0.0, 0.6))
+        depth, label = render_depth([(P, N, R, t)], K, 480, 640)
+        out.append((backproject(depth, K, label == 0)[0], R, t))
+    return out
+
+
+@pytest.mark.parametrize(
+    "method,icp,tol",
+    [
+        ("super4pcs", False, 0.1),
+        ("super4pcs", True, 0.02),
+        ("ransac", True, 0.02),
+        pytest.param("fgr", True, 0.02, marks=pytest.mark.xfail(reason="FGR on FPFH fails on most partial views of this shape (known, see report)", strict=False)),
+    ],
+)
+def test_methods_on_rendered_views(syn, views, method, icp, tol):
+    """Each method recovers at least 2 of 3 rendered views within tol x diameter (ADD)."""
+    from sixdpose.evaluation.metrics import add
+
+    ds = open_dataset(syn)
+    m = ds.model(15)
+    cfg = get_preset("default", scene_voxel_rel=0.025, model_voxel_rel=0.025)
+    cache = ReferenceCache(ds)
+    errs = []
+    for pts, R, t in views:
+        est = estimate_pose(pts, 15, method, cache, cfg, icp=icp)
+        assert est.T.shape == (4, 4) and est.time > 0 and 0 <= est.score <= 1
+        np.testing.assert_allclose(est.T[:3, :3] @ est.T[:3, :3].T, np.eye(3), atol=1e-6)
+        assert np.linalg.det(est.T[:3, :3]) == pytest.approx(1.0)
+        errs.append(add(est.T[:3, :3], est.T[:3, 3], R, t, m.points))
+    assert sum(e < tol * m.diameter for e in errs) >= 2, errs
+
+
+def test_presets():
+    assert PRESETS["paper"].s4pcs_overlap == 0.7 and PRESETS["paper"].s4pcs_delta == 0.01
+    assert PRESETS["paper"].s4pcs_samples == 200 and PRESETS["paper"].model_voxel == 0.002
+    assert PRESETS["paper"].scene_voxel_rel is None
+    with pytest.raises(ValueError, match="bogus"):
+        get_preset("default", bogus=1)
+    with pytest.raises(ValueError, match="unknown preset"):
+        get_preset("nope")
+
+
+def test_runner_writes_bop_rows_and_evaluates(syn, tmp_path):
+    out = tmp_path / "r.csv"
+    assert main(["register", "--data", str(syn), "--method", "super4pcs", "--icp", "--out", str(out), "--workers", "1", "--no-progress"]) == 0
+    rows = list(csv.DictReader(open(out)))
+    assert list(rows[0]) == ["scene_id", "im_id", "obj_id", "score", "R", "t", "time"]
+    assert len(rows) == 4  # image 0 has two instances of the same object: both registered
+    assert [(r["scene_id"], r["im_id"]) for r in rows] == [("0", "0"), ("0", "0"), ("1", "1"), ("0", "2")]
+    assert len(rows[0]["R"].split()) == 9 and len(rows[0]["t"].split()) == 3
+    assert 400 < float(rows[2]["t"].split()[2]) < 700  # millimetres
+    assert rows[0]["time"] == rows[1]["time"]  # BOP: time of the whole image on each of its rows
+    ests = load_results(out)
+    res = evaluate(open_dataset(syn), ests, min_px=50)
+    assert res.n_gt == 4 and res.accuracy == 100.0
+    assert res.fps > 0 and res.instances_per_s == pytest.approx(4 * res.fps / 3)
+    ev = tmp_path / "ev"
+    assert main(["evaluate", "--data", str(syn), "--results", str(out), "--out", str(ev), "--min-px", "50"]) == 0
+    table = list(csv.DictReader(open(ev / "add_s_per_object.csv")))
+    assert table[0]["obj_id"] == "15" and float(table[-2]["add_s_accuracy"]) == 100.0
+    assert "tabular" in (ev / "add_s.tex").read_text()
+    assert (ev / "timing.csv").is_file()
+
+
+def test_evaluate_matching_and_min_px(syn):
+    ds = open_dataset(syn)
+    s0 = ds[0]
+    g0, g1 = s0.instances
+    good = [Estimate(0, 0, 15, 0.9, g1.R, g1.t, 0.1), Estimate(0, 0, 15, 0.8, g0.R, g0.t, 0.1)]
+    assert evaluate(ds, good, min_px=0).accuracy == 100.0  # order of estimates does not matter
+    # two estimates at the same instance: only one can match
+    dup = [Estimate(0, 0, 15, 0.9, g1.R, g1.t, 0.1), Estimate(0, 0, 15, 0.8, g1.R, g1.t, 0.1)]
+    r = evaluate(ds, dup, min_px=0)
+    assert (r.n_gt, r.n_correct) == (2, 1)
+    # a zero-score estimate is "no estimate"; a top-scoring wrong one takes the only slot
+    far = Estimate(0, 0, 15, 0.99, g0.R, g0.t + 1.0, 0.1)
+    r = evaluate(ds, [far, Estimate(0, 0, 15, 0.5, g0.R, g0.t, 0.1), Estimate(0, 0, 15, 0.4, g1.R, g1.t, 0.1)], min_px=0)
+    assert r.n_correct == 1
+    # min_px drops the small instance
+    r = evaluate(ds, good, min_px=max(g0.px_visib, g1.px_visib))
+    assert r.n_gt == 1
+    with pytest.raises(DatasetError, match="not in the dataset"):
+        evaluate(ds, [Estimate(9, 99, 15, 1.0, np.eye(3), np.zeros(3), 0.1)])
+
+
+def test_unusable_instances_get_score_zero(syn, tmp_path):
+    pred = tmp_path / "pred"
+    pred.mkdir()
+    s = open_dataset(syn)[1]
+    m = s.instances[0].mask
+    empty = np.zeros_like(m)
+    np.savez(pred / f"{s.scene_id}_{s.im_id}.npz", masks=np.stack([m, empty, m]), labels=np.array([15, 15, 99]),
+             scores=np.array([0.9, 0.8, 0.7]))
+    dets = load_predicted_masks(pred, s.scene_id, s.im_id)
+    assert [(d[0], d[1]) for d in dets] == [(15, pytest.approx(0.9)), (15, pytest.approx(0.8)), (99, pytest.approx(0.7))]
+    assert load_predicted_masks(pred, 0, 0) == []  # no file: no detections
+    rows = run_registration(syn, "super4pcs", masks=str(pred), workers=1, progress=False, indices=[1])
+    assert len(rows) == 3
+    assert rows[0].score > 0 and rows[0].reason == ""
+    assert rows[1].score == 0 and "valid depth points" in rows[1].reason
+    assert rows[2].score == 0 and "no model" in rows[2].reason
+    (pred / "0_0.npz").write_bytes(b"junk")
+    with pytest.raises(DatasetError, match="0_0.npz"):
+        load_predicted_masks(pred, 0, 0)
+
+
+def test_register_cli_errors(syn, tmp_path, capsys):
+    assert main(["register", "--data", str(tmp_path / "none"), "--method", "fgr", "--out", str(tmp_path / "x.csv")]) == 2
+    assert main(["register", "--data", str(syn), "--method", "fgr", "--masks", str(tmp_path / "nodir"), "--out", str(tmp_path / "x.csv")]) == 2
+    assert main(["register", "--data", str(syn), "--method", "fgr", "--set", "nope=1", "--out", str(tmp_path / "x.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "predicted-mask directory not found" in err and "nope" in err
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_two_workers_match_one(syn, tmp_path):
+    a = run_registration(syn, "super4pcs", workers=1, progress=False)
+    b = run_registration(syn, "super4pcs", workers=2, progress=False)
+    assert [(r.scene_id, r.im_id, r.obj_id) for r in a] == [(r.scene_id, r.im_id, r.obj_id) for r in b]
+    for ra, rb in zip(a, b):
+        np.testing.assert_allclose(ra.R, rb.R, atol=1e-9)
+
+
+@needs_ycbv
+def test_real_depth_ycbv_every_method(tmp_path):
+    """Every method on real Kinect depth (ycbv_sample, GT masks, 2 images): ADD-S within 10 % for most."""
+    from sixdpose.evaluation.metrics import adds
+
+    ds = open_dataset(YCBV, split="train_real")
+    cache = ReferenceCache(ds)
+    cfg = get_preset("default")
+    for method in ("ransac", "fgr", "super4pcs"):
+        ok = n = 0
+        for i in (0, 25):
+            s = ds[i]
+            for inst in s.instances:
+                pts, _, _ = backproject(s.depth, s.K, inst.mask)
+                est = estimate_pose(pts, inst.obj_id, method, cache, cfg, icp=True)
+                m = ds.model(inst.obj_id)
+                ok += adds(est.T[:3, :3], est.T[:3, 3], inst.R, inst.t, m.points) < 0.1 * m.diameter
+                n += 1
+        assert ok >= n - 2, (method, ok, n)
