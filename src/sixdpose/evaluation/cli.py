@@ -15,6 +15,8 @@ def register(sub) -> None:
     p.add_argument("--out", default=None, help="output directory (default: next to the results, <results>_eval)")
     p.add_argument("--min-px", type=int, default=400, help="count GT instances with at least this many visible pixels")
     p.add_argument("--threshold", type=float, default=0.1, help="correct if ADD(-S) < threshold x diameter")
+    p.add_argument("--symmetric-ids", default=None,
+                   help="BOP only: comma-separated obj_ids to treat as symmetric (overrides models_info.json)")
     p.add_argument("--label", default=None, help="method label for the tables (default: results file stem)")
     p.set_defaults(func=_run)
 
@@ -25,7 +27,15 @@ def _run(args) -> int:
 
     res_path = Path(args.results)
     ests = load_results(res_path)
-    ds = open_dataset(args.data, split=args.split)
+    kw = {}
+    if args.symmetric_ids:
+        from ..cli import UserError
+
+        try:
+            kw["symmetric_ids"] = [int(x) for x in args.symmetric_ids.split(",") if x.strip()]
+        except ValueError:
+            raise UserError(f"--symmetric-ids: expected comma-separated integers, got {args.symmetric_ids!r}") from None
+    ds = open_dataset(args.data, split=args.split, **kw)
     res = evaluate(ds, ests, min_px=args.min_px, threshold=args.threshold, progress=True)
     out = Path(args.out) if args.out else res_path.with_name(res_path.stem + "_eval")
     paths = write_tables(res, out, label=args.label or res_path.stem)

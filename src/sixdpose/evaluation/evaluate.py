@@ -234,3 +234,24 @@ def write_tables(res: EvalResult, out_dir: str | Path, label: str = "method") ->
 
 def _tex(s: str) -> str:
     return s.replace("\\", "\\textbackslash{}").replace("_", "\\_").replace("&", "\\&").replace("%", "\\%")
+
+
+def write_method_table(rows: list[dict], columns: list[str], csv_path: str | Path, tex_path: str | Path | None = None) -> None:
+    """Write a small table (list of dicts) as CSV and, optionally, as a LaTeX ``tabular``
+    (used for the hybrid rows of Tables II and III)."""
+    csv_path = Path(csv_path)
+    csv_path.parent.mkdir(parents=True, exist_ok=True)
+    with open(csv_path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(columns)
+        for r in rows:
+            w.writerow([r[c] for c in columns])
+    if tex_path is not None:
+        def fmt(v):
+            return f"{v:.2f}" if isinstance(v, float) else _tex(str(v))
+
+        lines = ["\\begin{tabular}{" + "l" * 2 + "r" * (len(columns) - 2) + "}", "\\toprule",
+                 " & ".join(_tex(c) for c in columns) + " \\\\", "\\midrule"]
+        lines += [" & ".join(fmt(r[c]) for c in columns) + " \\\\" for r in rows]
+        lines += ["\\bottomrule", "\\end{tabular}"]
+        Path(tex_path).write_text("\n".join(lines) + "\n")

@@ -1,0 +1,54 @@
+# sixdpose: make targets are the dependency graph of the project.
+#   make setup      system packages (as root) + .venv from uv.lock
+#   make test       everything CI runs: unit/integration tests + every notebook on the smoke profile
+#   make demo       the whole chain at a small scale on a laptop CPU (data/demo, figures/)
+#   make reproduce  the paper-scale run (GPU machine): 25,000 images, all notebooks
+#   make benchmark  the benchmark scripts (print their figures)
+
+SHELL := /bin/bash
+PYTHON_SYS ?= python3
+UV := $(PYTHON_SYS) -m uv
+VENV := .venv
+PY := $(VENV)/bin/python
+APT_PKGS := libegl1 libgl1-mesa-dri libgbm1 libglib2.0-0 libusb-1.0-0
+SIXDPOSE_YCB ?= $(abspath ../shared/data/ycb)
+export SIXDPOSE_YCB
+WORKERS ?= 2
+PAPERMILL := $(PY) -m papermill --cwd notebooks --log-output --no-progress-bar
+
+.PHONY: setup apt venv test test-unit test-notebooks demo reproduce benchmark clean-data
+
+setup: apt venv
+
+apt:
+	@if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	  missing=$$(for p in $(APT_PKGS); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
+	  if [ -n "$$missing" ]; then echo "installing: $$missing"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; fi; \
+	else echo "not root: make sure these Debian packages are installed: $(APT_PKGS)"; fi
+
+venv: $(VENV)/.synced
+
+$(VENV)/.synced: pyproject.toml uv.lock
+	@$(UV) --version >/dev/null 2>&1 || $(PYTHON_SYS) -m pip install -q uv
+	$(UV) sync --frozen --python 3.11 --extra test
+	@touch $@
+
+test: setup
+	$(PY) -m pytest -p no:dash -q tests
+	SIXDPOSE_PROFILE=smoke $(PY) -m pytest -p no:dash -q --nbval-lax notebooks
+
+demo: setup
+	mkdir -p notebooks/executed figures
+	$(PAPERMILL) notebooks/01_generate_dataset.ipynb notebooks/executed/01_generate_dataset.ipynb -p PROFILE demo -p WORKERS $(WORKERS)
+	$(PAPERMILL) notebooks/02_dataset_overview.ipynb notebooks/executed/02_dataset_overview.ipynb -p PROFILE demo
+	@for nb in 03_train_segmentation 04_hybrid_registration; do \
+	  if [ -f notebooks/$$nb.ipynb ]; then $(PAPERMILL) notebooks/$$nb.ipynb notebooks/executed/$$nb.ipynb -p PROFILE demo || exit 1; fi; done
+
+reproduce: setup
+	mkdir -p notebooks/executed figures
+	@for nb in notebooks/[0-9]*.ipynb; do \
+	  $(PAPERMILL) $$nb notebooks/executed/$$(basename $$nb) -p PROFILE paper -p WORKERS $(WORKERS) || exit 1; done
+
+benchmark: setup
+	@for b in benchmarks/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
