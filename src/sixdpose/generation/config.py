@@ -51,8 +51,8 @@ class GenerationConfig:
     time_step: float = 5e-3  #: discrete MultibodyPlant step
     sim_time: float = 5.0  #: simulated seconds (stops early once everything is at rest)
     rest_speed: float = 0.02  #: at rest: every generalized velocity below this (m/s, rad/s)
-    contact_points_per_edge: int = 4  #: contact spheres per box edge (see generation.sim)
-    table_edge_spacing: float = 0.02  #: spacing of the contact spheres along the table top's edges
+    contact_points_per_edge: int = 3  #: contact spheres per box edge (see generation.sim)
+    table_edge_spacing: float = 0.05  #: spacing of the contact spheres along the table top's edges
     scene_radius: float = 3.0  #: objects further than this from the table centre have left the scene
     max_attempts: int = 6  #: re-draws of a scene that does not come to rest
     model_points: int = 20000  #: points of each reference model cloud

@@ -73,7 +73,7 @@ def render_scene(root: Path, cfg: GenerationConfig, assets_dir: Path, scene: int
         ``{"scene", "ok", "images", "seconds", "peak_rss_mb"}`` plus ``"error"`` if the scene failed
         (it then has no record and is retried by the next run).
     """
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     try:
         from .sim import SceneSimulator, intrinsics
 
@@ -122,9 +122,11 @@ def render_scene(root: Path, cfg: GenerationConfig, assets_dir: Path, scene: int
                   "objects": objects, "images": images}
         commit_scene(root, scene, scene_files(views), record)
         return {"scene": scene, "ok": True, "images": cfg.views, "seconds": time.perf_counter() - t0,
+                "cpu_seconds": time.process_time() - c0, "attempts": attempt + 1,
                 "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
     except Exception as e:  # recorded per scene; the run goes on
         return {"scene": scene, "ok": False, "images": 0, "seconds": time.perf_counter() - t0,
+                "cpu_seconds": time.process_time() - c0,
                 "error": f"{type(e).__name__}: {e}", "traceback": traceback.format_exc(),
                 "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
@@ -228,7 +230,8 @@ def generate(
         progress: show a progress bar on stderr.
     Returns:
         summary dict: ``scenes_done``, ``scenes_failed`` (list of {scene, error}), ``images``,
-        ``seconds``, ``images_per_s``, ``peak_rss_mb`` (largest worker), ``manifest``.
+        ``seconds`` (wall), ``images_per_s``, ``cpu_seconds`` (summed over the scene workers),
+        ``peak_rss_mb`` (largest worker), ``manifest``.
     Raises:
         GenerationError, AssetError: bad arguments (nothing is written then).
     """
@@ -295,6 +298,7 @@ def generate(
         "images": images,
         "seconds": seconds,
         "images_per_s": images / seconds if seconds > 0 else float("nan"),
+        "cpu_seconds": sum(r["cpu_seconds"] for r in results),
         "peak_rss_mb": max((r["peak_rss_mb"] for r in results), default=0.0),
         "manifest": manifest,
     }
