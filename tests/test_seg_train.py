@@ -139,3 +139,20 @@ def test_ddp_two_cpu_processes(toy, tmp_path):
     p = subprocess.run(base + ["--resume", "--epochs", "2"], env=env, capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr[-3000:]
     assert torch.load(run / "model.pt", map_location="cpu", weights_only=True)["epoch"] == 2
+
+
+def test_diverged_loss_is_an_error(toy, tmp_path, monkeypatch):
+    """A non-finite loss stops training with a clear error instead of writing a broken model."""
+    from sixdpose.segmentation import data as segdata
+    from sixdpose.segmentation.train import TrainingError, train
+
+    orig = segdata.TrainView.__getitem__
+
+    def nan_image(self, i):
+        img, t = orig(self, i)
+        return img * float("nan"), t
+
+    monkeypatch.setattr(segdata.TrainView, "__getitem__", nan_image)
+    with pytest.raises(TrainingError, match="training diverged"):
+        train(toy, tmp_path / "r", profile="smoke", epochs=1, progress=False, **FAST)
+    assert not (tmp_path / "r" / "model.pt").exists()

@@ -75,7 +75,8 @@ class EvalResult:
         per_object: obj_id -> dict(name, n_gt, n_correct, accuracy (%)).
         accuracy: % over all counted GT instances. mean_object_accuracy: mean of per-object %.
         n_gt, n_correct: counts. fps, instances_per_s, n_images, n_estimates, total_time: timing.
-        records: per GT instance: (scene_id, im_id, obj_id, error (m) or nan, correct).
+        records: per counted GT instance: (scene_id, im_id, obj_id, index in ``Sample.instances``,
+            ADD(-S) error (m) of its match or of the nearest estimate, or nan, correct).
     """
 
     per_object: dict
@@ -142,7 +143,7 @@ def evaluate(dataset, estimates: list[Estimate], min_px: int = 400, threshold: f
             for j, g in enumerate(g_o):
                 ok = not math.isnan(matched[j])
                 best = matched[j] if ok else (float(err[:, j].min()) if len(e_o) else math.nan)
-                records.append((key[0], key[1], oid, best, ok))
+                records.append((key[0], key[1], oid, sample.instances.index(g), best, ok))
                 n_gt_obj[oid] += 1
                 n_ok_obj[oid] += int(ok)
     per_object = {

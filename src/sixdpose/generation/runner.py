@@ -75,10 +75,11 @@ def render_scene(root: Path, cfg: GenerationConfig, assets_dir: Path, scene: int
     """
     t0, c0 = time.perf_counter(), time.process_time()
     try:
-        from .sim import SceneSimulator, intrinsics
+        from .sim import SceneSimulator, intrinsics, set_catalogue
 
         catalog = load_catalog(assets_dir)
         targets, noise = default_pools(catalog)
+        set_catalogue(catalog)
         K = intrinsics(cfg)
         for attempt in range(cfg.max_attempts):
             rng = scene_rng(cfg.seed, scene, attempt)

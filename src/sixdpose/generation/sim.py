@@ -16,8 +16,10 @@ still moving after 5 s. Registering collision geometry costs Drake time quadrati
 which is why the spheres are not denser. The table is a box on four legs, the floor the top of a thick
 box at z = 0.
 
-Rendering: ``RenderEngineVtk`` (EGL, headless). Depth is rendered by the same engine from the same
-meshes, so ground truth and depth agree exactly.
+Rendering: ``RenderEngineVtk`` (EGL, headless) in a render-only SceneGraph kept for the life of a
+worker process (:class:`PoolRenderer`): loading the textured meshes into VTK once per worker instead
+of once per scene. Depth is rendered by the same engine from the same meshes, so ground truth and
+depth agree exactly.
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ from .scene import ObjectSpec
 TABLE_LABEL = 1000
 GROUND_LABEL = 1001
 _CONTACT_SPHERE_RADIUS = 1e-3
-_PARKING = np.array([0.0, 0.0, -50.0])  # out of sight, under the ground
+_PARKING = np.array([0.0, 0.0, -100.0])  # with x >= 1 km: beyond the far clipping plane
 
 
 def _contact_points(center: np.ndarray, size: np.ndarray, per_edge: int = 4) -> np.ndarray:
@@ -75,8 +77,34 @@ class SettleResult:
     off_table: list
 
 
+def _static_scene(cfg: GenerationConfig):
+    """Table top, legs and floor as ``(name, X (4x4), box size, rgba, label)``; shared by physics and rendering."""
+    tx, ty = cfg.table_size
+    thick = 0.04
+    leg_h = cfg.table_height - thick
+    out = []
+    X = np.eye(4)
+    X[2, 3] = cfg.table_height - thick / 2
+    out.append(("table", X, (tx, ty, thick), (0.55, 0.40, 0.26, 1.0), TABLE_LABEL))
+    for i, (sx, sy) in enumerate([(1, 1), (1, -1), (-1, 1), (-1, -1)]):
+        X = np.eye(4)
+        X[:3, 3] = (sx * (tx / 2 - 0.05), sy * (ty / 2 - 0.05), leg_h / 2)
+        out.append((f"leg{i}", X, (0.05, 0.05, leg_h), (0.45, 0.32, 0.2, 1.0), TABLE_LABEL))
+    X = np.eye(4)
+    X[2, 3] = -0.5  # a thick box: its top face is the floor at z = 0
+    out.append(("ground", X, (30.0, 30.0, 1.0), (0.62, 0.62, 0.6, 1.0), GROUND_LABEL))
+    return out
+
+
+def _rt(X: np.ndarray):
+    from pydrake.math import RigidTransform, RotationMatrix
+
+    return RigidTransform(RotationMatrix(X[:3, :3]), X[:3, 3])
+
+
 class SceneSimulator:
-    """A Drake diagram (MultibodyPlant + SceneGraph + VTK renderer) for one scene.
+    """Physics (a MultibodyPlant of collision boxes, no visuals) of one scene, rendered through the
+    process-wide :class:`PoolRenderer`.
 
     Args:
         specs: the scene's objects with initial poses.
@@ -86,40 +114,18 @@ class SceneSimulator:
     """
 
     def __init__(self, specs: list[ObjectSpec], props: dict[str, PhysicalProperties], mesh_paths: dict, cfg: GenerationConfig):
-        from pydrake.geometry import (
-            Box,
-            CollisionFilterDeclaration,
-            GeometryInstance,
-            GeometrySet,
-            IllustrationProperties,
-            MakeRenderEngineVtk,
-            Mesh,
-            PerceptionProperties,
-            ProximityProperties,
-            RenderEngineVtkParams,
-            RenderLabel,
-            Rgba,
-            Sphere,
-        )
-        from pydrake.math import RigidTransform, RotationMatrix
-        from pydrake.multibody.plant import (
-            AddMultibodyPlant,
-            CoulombFriction,
-            MultibodyPlantConfig,
-        )
-        from pydrake.geometry import AddContactMaterial
+        from pydrake.geometry import AddContactMaterial, Box, CollisionFilterDeclaration, GeometrySet, ProximityProperties, Sphere
+        from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlantConfig
         from pydrake.multibody.tree import RotationalInertia, SpatialInertia
         from pydrake.systems.analysis import Simulator
         from pydrake.systems.framework import DiagramBuilder
 
-        self.cfg, self.specs = cfg, specs
-        self._RigidTransform, self._RotationMatrix = RigidTransform, RotationMatrix
+        self.cfg, self.specs, self.mesh_paths = cfg, specs, mesh_paths
         builder = DiagramBuilder()
         plant, sg = AddMultibodyPlant(
             MultibodyPlantConfig(time_step=cfg.time_step, contact_model="point", discrete_contact_approximation="sap"),
             builder,
         )
-        sg.AddRenderer("vtk", MakeRenderEngineVtk(RenderEngineVtkParams(backend="EGL")))
         friction = CoulombFriction(0.6, 0.5)
 
         def proximity():
@@ -127,35 +133,12 @@ class SceneSimulator:
             AddContactMaterial(None, None, friction, p)
             return p
 
-        def visual(body, X, shape, name, label, rgba=None):
-            gi = GeometryInstance(X, shape, name)
-            pp, ip = PerceptionProperties(), IllustrationProperties()
-            if rgba is not None:
-                pp.AddProperty("phong", "diffuse", Rgba(*rgba))
-                ip.AddProperty("phong", "diffuse", Rgba(*rgba))
-            pp.AddProperty("label", "id", RenderLabel(label))
-            gi.set_perception_properties(pp)
-            gi.set_illustration_properties(ip)
-            plant.RegisterVisualGeometry(body, gi)
-
         W = plant.world_body()
-        tx, ty = cfg.table_size
-        thick = 0.04
-        X_table = RigidTransform([0.0, 0.0, cfg.table_height - thick / 2])
-        static = [plant.RegisterCollisionGeometry(W, X_table, Box(tx, ty, thick), "table", proximity())]
+        static = [plant.RegisterCollisionGeometry(W, _rt(X), Box(*size), name, proximity())
+                  for name, X, size, _, _ in _static_scene(cfg)]
         # spheres along the table top's edges, so an object's face resting on an edge is supported
-        for j, p in enumerate(_table_edge_points(tx, ty, cfg.table_height, cfg.table_edge_spacing)):
-            static.append(plant.RegisterCollisionGeometry(W, RigidTransform(p), Sphere(0.002), f"tedge{j}", proximity()))
-        visual(W, X_table, Box(tx, ty, thick), "table", TABLE_LABEL, (0.55, 0.40, 0.26, 1.0))
-        leg_h = cfg.table_height - thick
-        for i, (sx, sy) in enumerate([(1, 1), (1, -1), (-1, 1), (-1, -1)]):
-            X_leg = RigidTransform([sx * (tx / 2 - 0.05), sy * (ty / 2 - 0.05), leg_h / 2])
-            static.append(plant.RegisterCollisionGeometry(W, X_leg, Box(0.05, 0.05, leg_h), f"leg{i}", proximity()))
-            visual(W, X_leg, Box(0.05, 0.05, leg_h), f"leg{i}", TABLE_LABEL, (0.45, 0.32, 0.2, 1.0))
-        X_ground = RigidTransform([0, 0, -0.5])  # a thick box: its top face is the floor at z = 0
-        static.append(plant.RegisterCollisionGeometry(W, X_ground, Box(30, 30, 1.0), "ground", proximity()))
-        visual(W, X_ground, Box(30, 30, 1.0), "ground", GROUND_LABEL, (0.62, 0.62, 0.6, 1.0))
-
+        for j, p in enumerate(_table_edge_points(*cfg.table_size, cfg.table_height, cfg.table_edge_spacing)):
+            static.append(plant.RegisterCollisionGeometry(W, _rt(_translation(p)), Sphere(0.002), f"tedge{j}", proximity()))
         self.bodies = []
         boxes = []
         for k, s in enumerate(specs):
@@ -166,10 +149,9 @@ class SceneSimulator:
                 pr.mass, pr.com, RotationalInertia(I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])
             )
             body = plant.AddRigidBody(f"{s.name}_{s.inst}", inst, M)
-            boxes.append(plant.RegisterCollisionGeometry(body, RigidTransform(pr.box_center), Box(*pr.box_size), f"box{k}", proximity()))
+            boxes.append(plant.RegisterCollisionGeometry(body, _rt(_translation(pr.box_center)), Box(*pr.box_size), f"box{k}", proximity()))
             for j, p in enumerate(_contact_points(pr.box_center, pr.box_size, cfg.contact_points_per_edge)):
-                plant.RegisterCollisionGeometry(body, RigidTransform(p), Sphere(_CONTACT_SPHERE_RADIUS), f"pt{k}_{j}", proximity())
-            visual(body, RigidTransform(), Mesh(str(mesh_paths[s.name])), f"mesh{k}", k + 1)
+                plant.RegisterCollisionGeometry(body, _rt(_translation(p)), Sphere(_CONTACT_SPHERE_RADIUS), f"pt{k}_{j}", proximity())
             self.bodies.append(body)
         plant.Finalize()
         # Boxes are passive: only the contact spheres of other bodies touch them.
@@ -177,16 +159,14 @@ class SceneSimulator:
         sg.collision_filter_manager().Apply(
             CollisionFilterDeclaration().ExcludeWithin(box_set).ExcludeBetween(box_set, GeometrySet(static))
         )
-        self.plant, self.scene_graph = plant, sg
+        self.plant = plant
         self.diagram = builder.Build()
         self.simulator = Simulator(self.diagram)
         self.context = self.simulator.get_mutable_context()
         self.plant_context = plant.GetMyMutableContextFromRoot(self.context)
         for body, s in zip(self.bodies, specs):
-            plant.SetFreeBodyPose(self.plant_context, body, self._X(s.X_WO))
-
-    def _X(self, X: np.ndarray):
-        return self._RigidTransform(self._RotationMatrix(X[:3, :3]), X[:3, 3])
+            plant.SetFreeBodyPose(self.plant_context, body, _rt(s.X_WO))
+        self._result: SettleResult | None = None
 
     def settle(self) -> SettleResult:
         """Simulate until every body is at rest (checked every 0.1 s) or ``cfg.sim_time`` elapses."""
@@ -207,43 +187,165 @@ class SceneSimulator:
             X = plant.EvalBodyPoseInWorld(pc, body).GetAsMatrix4()
             p = X[:3, 3]
             if p[2] < -0.05 or np.hypot(p[0], p[1]) > cfg.scene_radius or not np.all(np.isfinite(X)):
-                left.append(k)
-                X = np.eye(4)
-                X[:3, 3] = _PARKING + np.array([3.0 * k, 0, 0])
-                plant.SetFreeBodyPose(pc, body, self._X(X))
+                left.append(k)  # not rendered, not annotated
             elif p[2] < cfg.table_height - 0.05:
                 off.append(k)
             X_WO.append(X)
-        if left:  # the parked bodies must not move during rendering; velocities are irrelevant then
-            pass
-        return SettleResult(X_WO, at_rest, t, left, off)
+        self._result = SettleResult(X_WO, at_rest, t, left, off)
+        return self._result
+
+    def render(self, X_WC: np.ndarray):
+        """Render the settled scene from camera pose ``X_WC`` (4, 4); see :meth:`PoolRenderer.render`."""
+        if self._result is None:
+            raise RuntimeError("settle() the scene before rendering it")
+        r = PoolRenderer.get(self.cfg)
+        if r.owner is not self:
+            r.set_scene(self.specs, self._result.X_WO, self._result.left, self.mesh_paths)
+            r.owner = self
+        return r.render(X_WC)
+
+
+def _translation(p) -> np.ndarray:
+    X = np.eye(4)
+    X[:3, 3] = p
+    return X
+
+
+class PoolRenderer:
+    """A render-only SceneGraph with ``RenderEngineVtk`` (EGL), kept for the life of the process.
+
+    Loading textured meshes into VTK is the costly part of building a scene, so each object instance
+    slot ``(name, inst)`` gets a frame once and its mesh the first time a scene uses it; slots unused by
+    the current scene are parked 1 km away, beyond the far clipping plane, so they produce no pixels.
+    Labels are mapped back to the scene's numbering: object k of the scene has label k + 1.
+    """
+
+    _instance: "PoolRenderer | None" = None
+    _key = None
+
+    @classmethod
+    def get(cls, cfg: GenerationConfig) -> "PoolRenderer":
+        """The process-wide renderer for ``cfg``'s camera and static scene (rebuilt if they change)."""
+        key = (cfg.camera, cfg.table_size, cfg.table_height, cfg.max_instances)
+        if cls._instance is None or cls._key != key:
+            cls._instance, cls._key = cls(cfg), key
+        return cls._instance
+
+    def __init__(self, cfg: GenerationConfig):
+        from pydrake.geometry import (
+            Box, ClippingRange, ColorRenderCamera, DepthRange, DepthRenderCamera, GeometryInstance,
+            MakeRenderEngineVtk, PerceptionProperties, RenderCameraCore, RenderEngineVtkParams, RenderLabel, Rgba,
+            SceneGraph,
+        )
+        from pydrake.systems.framework import DiagramBuilder
+        from pydrake.systems.sensors import CameraInfo
+
+        self.cfg = cfg
+        builder = DiagramBuilder()
+        sg = builder.AddSystem(SceneGraph())
+        sg.AddRenderer("vtk", MakeRenderEngineVtk(RenderEngineVtkParams(backend="EGL")))
+        self.source = sg.RegisterSource("sixdpose_pool")
+        for name, X, size, rgba, label in _static_scene(cfg):
+            gi = GeometryInstance(_rt(X), Box(*size), name)
+            pp = PerceptionProperties()
+            pp.AddProperty("phong", "diffuse", Rgba(*rgba))
+            pp.AddProperty("label", "id", RenderLabel(label))
+            gi.set_perception_properties(pp)
+            sg.RegisterAnchoredGeometry(self.source, gi)
+        self.sg = sg
+        self._frames: dict[tuple[str, int], object] = {}
+        self._slots: dict[tuple[str, int], int] = {}
+        self._loaded: set = set()
+        self._builder = builder
+        self._diagram = None
+        cam = cfg.camera
+        core = RenderCameraCore("vtk", CameraInfo(cam.width, cam.height, np.deg2rad(cam.fov_y_deg)),
+                                ClippingRange(0.01, cam.far + 1), _rt(np.eye(4)))
+        self._color = ColorRenderCamera(core, False)
+        self._depth = DepthRenderCamera(core, DepthRange(cam.near, cam.far))
+        self._lut = None
+        self.owner = None  #: the SceneSimulator whose scene is placed
+        self._GeometryInstance, self._PerceptionProperties, self._RenderLabel = GeometryInstance, PerceptionProperties, RenderLabel
+
+    def _ensure_frames(self, names):
+        """Register frames for every slot of ``names`` (before the diagram is built)."""
+        from pydrake.geometry import GeometryFrame
+
+        for name in sorted(names):
+            for i in range(self.cfg.max_instances):
+                if (name, i) not in self._frames:
+                    self._slots[(name, i)] = len(self._slots)
+                    self._frames[(name, i)] = self.sg.RegisterFrame(self.source, GeometryFrame(f"{name}_{i}"))
+
+    def set_scene(self, specs: list[ObjectSpec], X_WO: list, left: list, mesh_paths: dict) -> None:
+        """Place the scene's objects (final poses ``X_WO``; indices in ``left`` are not shown)."""
+        from pydrake.geometry import FramePoseVector, Mesh
+
+        if self._diagram is None:
+            from ..constants import TARGET_OBJECTS  # noqa: F401  (names come from the catalogue below)
+
+            self._ensure_frames(mesh_paths_all(mesh_paths))
+            self._diagram = self._builder.Build()
+            self._context = self._diagram.CreateDefaultContext()
+            self._sg_context = self.sg.GetMyMutableContextFromRoot(self._context)
+        unknown = [s.name for s in specs if (s.name, s.inst) not in self._frames]
+        if unknown:
+            raise RuntimeError(f"objects not in the renderer's catalogue: {sorted(set(unknown))}")
+        lut = np.zeros(1 << 15, dtype=np.int32)
+        lut[TABLE_LABEL], lut[GROUND_LABEL] = TABLE_LABEL, GROUND_LABEL
+        lut[32766] = 32766  # empty
+        poses = FramePoseVector()
+        placed = {}
+        for k, s in enumerate(specs):
+            if k not in left:
+                placed[(s.name, s.inst)] = (k, X_WO[k])
+        for slot, fid in self._frames.items():
+            j = self._slots[slot]
+            if slot in placed:
+                k, X = placed[slot]
+                if slot not in self._loaded:
+                    gi = self._GeometryInstance(_rt(np.eye(4)), Mesh(str(mesh_paths[slot[0]])), f"mesh_{slot[0]}_{slot[1]}")
+                    pp = self._PerceptionProperties()
+                    pp.AddProperty("label", "id", self._RenderLabel(j + 1))
+                    gi.set_perception_properties(pp)
+                    self.sg.RegisterGeometry(self._sg_context, self.source, fid, gi)
+                    self._loaded.add(slot)
+                lut[j + 1] = k + 1
+                poses.set_value(fid, _rt(X))
+            else:
+                poses.set_value(fid, _rt(_translation(_PARKING + [1000.0 + 3.0 * j, 0.0, 0.0])))
+        self.sg.get_source_pose_port(self.source).FixValue(self._sg_context, poses)
+        self._lut = lut
 
     def render(self, X_WC: np.ndarray):
         """Render from camera pose ``X_WC`` (4, 4).
 
         Returns:
             rgb (H, W, 3) uint8, depth (H, W) float32 metres (0.0 = no surface within range),
-            label (H, W) int32 (object k has label k + 1; table 1000, ground 1001, empty 32766).
+            label (H, W) int32 (scene object k has label k + 1; table 1000, ground 1001, empty 32766).
         """
-        from pydrake.geometry import ClippingRange, ColorRenderCamera, DepthRange, DepthRenderCamera, RenderCameraCore
-        from pydrake.systems.sensors import CameraInfo
-
         cam = self.cfg.camera
-        if not hasattr(self, "_cams"):
-            core = RenderCameraCore(
-                "vtk", CameraInfo(cam.width, cam.height, np.deg2rad(cam.fov_y_deg)), ClippingRange(0.01, cam.far + 1), self._X(np.eye(4))
-            )
-            self._cams = (ColorRenderCamera(core, False), DepthRenderCamera(core, DepthRange(cam.near, cam.far)))
-        color_cam, depth_cam = self._cams
-        sg = self.scene_graph
-        qo = sg.get_query_output_port().Eval(sg.GetMyContextFromRoot(self.context))
-        frame = sg.world_frame_id()
-        X = self._X(X_WC)
-        rgb = np.array(qo.RenderColorImage(color_cam, frame, X).data, copy=True)[..., :3]
-        depth = np.array(qo.RenderDepthImage(depth_cam, frame, X).data, copy=True)[..., 0].astype(np.float32)
+        qo = self.sg.get_query_output_port().Eval(self._sg_context)
+        frame = self.sg.world_frame_id()
+        X = _rt(X_WC)
+        rgb = np.array(qo.RenderColorImage(self._color, frame, X).data, copy=True)[..., :3]
+        depth = np.array(qo.RenderDepthImage(self._depth, frame, X).data, copy=True)[..., 0].astype(np.float32)
         depth[~np.isfinite(depth) | (depth < cam.near) | (depth > cam.far)] = 0.0
-        label = np.array(qo.RenderLabelImage(color_cam, frame, X).data, copy=True)[..., 0].astype(np.int32)
-        return rgb, depth, label
+        label = np.array(qo.RenderLabelImage(self._color, frame, X).data, copy=True)[..., 0].astype(np.int32)
+        return rgb, depth, self._lut[label]
+
+
+_ALL_NAMES: set = set()
+
+
+def set_catalogue(names) -> None:
+    """Declare every object name the process may render (frames are made for all of them at once)."""
+    _ALL_NAMES.update(names)
+
+
+def mesh_paths_all(mesh_paths: dict) -> set:
+    """Names to make renderer frames for: the declared catalogue plus those of ``mesh_paths``."""
+    return set(_ALL_NAMES) | set(mesh_paths)
 
 
 def intrinsics(cfg: GenerationConfig) -> np.ndarray:

@@ -144,6 +144,10 @@ class _Images(torch.utils.data.Dataset):
         return s.scene_id, s.im_id, s.rgb
 
 
+def _transpose(batch):
+    return list(zip(*batch))
+
+
 def segment(
     data: str | Path,
     ckpt: str | Path,
@@ -197,7 +201,7 @@ def segment(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     loader = torch.utils.data.DataLoader(
-        _Images(ds, indices), batch_size=batch_size, num_workers=num_workers, collate_fn=lambda b: list(zip(*b))
+        _Images(ds, indices), batch_size=batch_size, num_workers=num_workers, collate_fn=_transpose
     )
     bar = None
     if progress:

@@ -17,7 +17,6 @@ from torch import nn
 
 from .config import SegConfig
 
-log = logging.getLogger(__name__)
 
 
 def _weights_enum(backbone: str):
@@ -36,7 +35,9 @@ def cached_weights_path(backbone: str) -> str:
     return os.path.join(torch.hub.get_dir(), "checkpoints", os.path.basename(url))
 
 
-def build_model(cfg: SegConfig, num_classes: int, *, init: str | None = None) -> tuple[nn.Module, str]:
+def build_model(
+    cfg: SegConfig, num_classes: int, *, init: str | None = None, verbose: bool = True
+) -> tuple[nn.Module, str]:
     """Build a torchvision ``MaskRCNN`` for ``num_classes`` object classes (+ background).
 
     Args:
@@ -47,6 +48,7 @@ def build_model(cfg: SegConfig, num_classes: int, *, init: str | None = None) ->
             ``sixdpose`` logger, and the backbone starts from random initialisation); or the ``init``
             recorded in a checkpoint (``"imagenet"``/``"random"``) to rebuild the same layout without
             loading anything (the weights come from the checkpoint).
+        verbose: log the missing-weights line (False on all but one of several processes).
     Returns:
         ``(model, init)`` where ``init`` is ``"imagenet"`` or ``"random"``. As in torchvision, an
         ImageNet-initialised backbone keeps its BatchNorm statistics frozen; a randomly initialised one
@@ -71,7 +73,7 @@ def build_model(cfg: SegConfig, num_classes: int, *, init: str | None = None) ->
             if os.path.isfile(path):
                 weights = _weights_enum(cfg.backbone)
                 init = "imagenet"
-            else:
+            elif verbose:
                 logging.getLogger("sixdpose").warning(
                     "ImageNet weights for %s not in the local torch hub cache (%s); offline, so training "
                     "starts from random initialisation",

@@ -27,6 +27,7 @@ import os
 import platform
 import time
 from contextlib import nullcontext
+from datetime import timedelta
 from pathlib import Path
 
 import torch
@@ -151,8 +152,11 @@ def train(
     world, rank, local_rank = _dist_info()
     distributed = world > 1
     dev = pick_device(device, local_rank)
+    if dev.type == "cuda":
+        torch.cuda.set_device(dev)
     if distributed and not dist.is_initialized():
-        dist.init_process_group("nccl" if dev.type == "cuda" else "gloo")
+        # long timeout: rank 0 scans the training images (one pass over the data) while the others wait
+        dist.init_process_group("nccl" if dev.type == "cuda" else "gloo", timeout=timedelta(hours=3))
     try:
         return _train(data, run_dir, profile, cfg, resume, dev, progress, overrides, world, rank, distributed)
     finally:
@@ -227,7 +231,9 @@ def _train(data, run_dir, profile, cfg, resume, dev, progress, overrides, world,
     ckpt = None
     if resume and (run_dir / ck.LAST).exists():
         ckpt = ck.load(run_dir / ck.LAST)
-    model, init = build_model(cfg, len(classes), init=None if ckpt is None else ckpt.get("init", "random"))
+    model, init = build_model(
+        cfg, len(classes), init=None if ckpt is None else ckpt.get("init", "random"), verbose=rank == 0
+    )
     model.to(dev)
     params = [p for p in model.parameters() if p.requires_grad]
     opt = torch.optim.Adam(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
@@ -307,13 +313,12 @@ def _train(data, run_dir, profile, cfg, resume, dev, progress, overrides, world,
                 loss_dict = ddp_model(images, targets)
             loss = sum(loss_dict.values())
             if not torch.isfinite(loss):
-                if use_amp:
-                    log.warning("non-finite loss at epoch %d step %d under AMP; step skipped", epoch + 1, step)
-                    opt.zero_grad(set_to_none=True)
-                    continue
-                raise TrainingError(
-                    f"loss became {loss.item()} at epoch {epoch + 1} step {step + 1}; training diverged (lower lr?)"
-                )
+                if not use_amp:
+                    raise TrainingError(
+                        f"loss became {loss.item()} at epoch {epoch + 1} step {step + 1}; training diverged (lower lr?)"
+                    )
+                # under AMP the grad scaler skips the update (on every rank, the gradients being all-reduced)
+                log.warning("non-finite loss at epoch %d step %d under AMP; the scaler skips this update", epoch + 1, step + 1)
             opt.zero_grad(set_to_none=True)
             scaler.scale(loss).backward()
             if cfg.grad_clip > 0:
