@@ -222,8 +222,32 @@ def get_reference(cache: ReferenceCache, obj_id: int, method: str, cfg: Registra
     return ref, dt
 
 
+def get_colour_grid(cache: ReferenceCache, obj_id: int, cfg: RegistrationConfig):
+    """The cached :class:`~sixdpose.registration.verify.ColourGrid` of ``obj_id`` (None if the model
+    has no colours); returns ``(grid, seconds spent building it now)``."""
+    key = ("colour_grid", int(obj_id), cfg.cv_grid_cells, cfg.cv_smooth_rel)
+    store = cache.__dict__.setdefault("_grids", {})
+    if key in store:
+        return store[key], 0.0
+    from .verify import build_grid
+
+    model = cache.dataset.model(obj_id)
+    if model.colors is None:
+        store[key] = None
+        return None, 0.0
+    grid = build_grid(model.points, model.colors, model.diameter, cells=cfg.cv_grid_cells, smooth_rel=cfg.cv_smooth_rel)
+    store[key] = grid
+    return grid, grid.time
+
+
 def estimate_pose(
-    points: np.ndarray, obj_id: int, method: str, cache: ReferenceCache, cfg: RegistrationConfig, icp: bool = False
+    points: np.ndarray,
+    obj_id: int,
+    method: str,
+    cache: ReferenceCache,
+    cfg: RegistrationConfig,
+    icp: bool = False,
+    colors: np.ndarray | None = None,
 ) -> PoseEstimate:
     """Full per-instance pipeline: scene preparation, global registration, optional ICP.
 
@@ -233,6 +257,10 @@ def estimate_pose(
         method: ``"ransac"``, ``"fgr"`` or ``"super4pcs"``.
         cache: per-process :class:`ReferenceCache`.
         cfg: configuration. icp: refine with ICP.
+        colors: optional (N, 3) colours in [0, 1] of ``points``; with ``cfg.colour_verify`` (and a
+            coloured model) the pose is then checked by :func:`~sixdpose.registration.verify.colour_search`
+            and, if a rotation about the centroid agrees better with the colours, replaced (and refined
+            by ICP again when ``icp``).
     Returns:
         :class:`PoseEstimate` whose ``time`` includes scene preparation, the first-use cost of the
         model's reference (charged once per process), the method and ICP.
@@ -246,8 +274,25 @@ def estimate_pose(
     est = _FUNCS[method](scene, ref, cfg)
     total = t_ref + scene.time + est.time
     info = dict(est.info, global_score=est.score, n_scene=len(scene.points))
+    T, score = est.T, est.score
     if icp:
-        r = refine_icp(scene, ref, est.T, cfg)
+        r = refine_icp(scene, ref, T, cfg)
         total += r.time
-        return PoseEstimate(r.T, r.score, total, info)
-    return PoseEstimate(est.T, est.score, total, info)
+        T, score = r.T, r.score
+    if cfg.colour_verify and colors is not None and len(colors) == len(points):
+        grid, t_grid = get_colour_grid(cache, obj_id, cfg)
+        if grid is not None:
+            from .verify import colour_search
+
+            t0 = time.perf_counter()
+            res = colour_search(T, points, colors, grid, ref.diameter, n_rot=cfg.cv_rotations, n_points=cfg.cv_points,
+                                tol_rel=cfg.cv_tol_rel, geo_margin=cfg.cv_geo_margin, smooth_rel=cfg.cv_smooth_rel,
+                                n_refine=cfg.cv_refine, seed=cfg.seed)
+            info.update(colour_changed=res.changed, colour_corr=res.col)
+            if res.changed:
+                T = res.T
+                if icp:
+                    r = refine_icp(scene, ref, T, cfg)
+                    T, score = r.T, r.score
+            total += t_grid + time.perf_counter() - t0
+    return PoseEstimate(T, score, total, info)

@@ -88,6 +88,14 @@ class RegistrationConfig:
     icp_kind: str = "point_to_plane"
     icp_distance_factor: float = 2.0
     icp_max_iteration: int = 30
+    colour_verify: bool = True
+    cv_rotations: int = 2048
+    cv_points: int = 150
+    cv_tol_rel: float = 0.02
+    cv_geo_margin: float = 0.05
+    cv_smooth_rel: float = 0.1
+    cv_refine: int = 4
+    cv_grid_cells: int = 64
     seed: int = 0
     extra: dict = field(default_factory=dict, compare=False)
 
@@ -113,6 +121,7 @@ PRESETS: dict[str, RegistrationConfig] = {
         s4pcs_stop_lcp=0.98,
         s4pcs_max_candidates=20000,
         s4pcs_max_time=30.0,
+        colour_verify=False,
     ),
     "default": RegistrationConfig(),
 }
