@@ -2,7 +2,7 @@
 
 Stages (one sub-package each): ``assets`` (YCB models), ``generation`` (Drake synthetic data),
 ``datasets`` (readers: synthetic layout and BOP), ``segmentation`` (Mask R-CNN),
-``registration`` (hybrid pose: RANSAC/FGR/Super4PCS + ICP), ``pose`` (learned pose),
+``registration`` (hybrid pose: RANSAC/FGR/Super4PCS + ICP),
 ``evaluation`` (ADD(-S), timing).
 """
 

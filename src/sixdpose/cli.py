@@ -19,7 +19,6 @@ COMMAND_MODULES = (
     "sixdpose.segmentation.cli",
     "sixdpose.registration.cli",
     "sixdpose.evaluation.cli",
-    "sixdpose.pose.cli",
 )
 
 
@@ -45,7 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
         try:
             mod = importlib.import_module(name)
         except ModuleNotFoundError as e:
-            if e.name == name:  # stage not present in this build
+            if e.name and (name == e.name or name.startswith(e.name + ".")):  # stage not in this build
                 continue
             raise
         mod.register(sub)

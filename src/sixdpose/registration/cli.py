@@ -31,6 +31,8 @@ def register(sub) -> None:
     p.add_argument("--workers", type=int, default=2, help="processes (default 2)")
     p.add_argument("--limit", type=int, default=None, help="only the first N images")
     p.add_argument("--min-px", type=int, default=0, help="with GT masks, skip instances with fewer visible pixels")
+    p.add_argument("--min-score", type=float, default=0.5,
+                   help="with predicted masks, skip detections whose score is below this (default 0.5)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_run)
 
@@ -48,7 +50,8 @@ def _run(args) -> int:
     if args.workers < 1:
         raise UserError("--workers must be >= 1")
     rows = run_registration(args.data, args.method, icp=args.icp, masks=args.masks, split=args.split, cfg=cfg,
-                            workers=args.workers, limit=args.limit, min_px=args.min_px, progress=not args.no_progress)
+                            workers=args.workers, limit=args.limit, min_px=args.min_px,
+                            min_score=args.min_score, progress=not args.no_progress)
     write_results(rows, args.out)
     n_bad = sum(1 for r in rows if r.reason)
     print(f"wrote {len(rows)} estimates ({n_bad} with score 0) to {args.out}")

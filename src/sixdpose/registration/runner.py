@@ -80,12 +80,12 @@ def load_predicted_masks(pred_dir: str | Path, scene_id: int, im_id: int) -> lis
 _W: dict = {}
 
 
-def _init_worker(data: str, split: str, method: str, icp: bool, cfg: dict, masks: str, min_px: int) -> None:
+def _init_worker(data: str, split: str, method: str, icp: bool, cfg: dict, masks: str, min_px: int, min_score: float = 0.5) -> None:
     from ..datasets.base import open_dataset
     from .geometry import ReferenceCache
 
     ds = open_dataset(data, split=split)
-    _W.update(ds=ds, cache=ReferenceCache(ds), method=method, icp=icp, cfg=RegistrationConfig(**cfg), masks=masks, min_px=min_px)
+    _W.update(ds=ds, cache=ReferenceCache(ds), method=method, icp=icp, cfg=RegistrationConfig(**cfg), masks=masks, min_px=min_px, min_score=min_score)
 
 
 def process_image(index: int) -> list[ResultRow]:
@@ -99,7 +99,7 @@ def process_image(index: int) -> list[ResultRow]:
     pred = masks != "gt"
     sample = ds[index]  # disk reads: not timed
     if pred:
-        dets = load_predicted_masks(masks, sample.scene_id, sample.im_id)
+        dets = [d for d in load_predicted_masks(masks, sample.scene_id, sample.im_id) if d[1] >= _W.get("min_score", 0.0)]
     else:
         dets = [(i.obj_id, 1.0, i.mask) for i in sample.instances if i.px_visib < 0 or i.px_visib >= min_px]
     known = ds.object_ids
@@ -121,7 +121,8 @@ def process_image(index: int) -> list[ResultRow]:
         if not reason:
             if np.isnan(sample.depth[mask]).any():
                 log.debug("scene %d image %d obj %d: NaN depth values ignored", sample.scene_id, sample.im_id, oid)
-            pts, _, _ = backproject(sample.depth, sample.K, mask)
+            use_rgb = cfg.colour_verify and sample.rgb is not None and sample.rgb.shape[:2] == mask.shape
+            pts, col, _ = backproject(sample.depth, sample.K, mask, sample.rgb if use_rgb else None)
             if len(pts) < 3:
                 reason = f"mask has {len(pts)} valid depth points (< 3)"
         if reason:
@@ -129,7 +130,7 @@ def process_image(index: int) -> list[ResultRow]:
             rows.append(ResultRow(sample.scene_id, sample.im_id, oid, 0.0, np.eye(3), np.zeros(3), 0.0, reason, time.perf_counter() - t0))
             continue
         try:
-            est = estimate_pose(pts, oid, method, cache, cfg, icp=icp)
+            est = estimate_pose(pts, oid, method, cache, cfg, icp=icp, colors=col)
         except DatasetError:
             raise
         except Exception as e:  # a numerical failure in one instance must not stop the run
@@ -178,6 +179,7 @@ def run_registration(
     workers: int = 2,
     limit: int | None = None,
     min_px: int = 0,
+    min_score: float = 0.5,
     progress: bool = True,
     indices=None,
 ) -> list[ResultRow]:
@@ -190,7 +192,8 @@ def run_registration(
         cfg: configuration (default: the ``default`` preset).
         workers: processes (a pool over images; 1 = in this process). Each worker uses one thread.
         limit: only the first ``limit`` images. min_px: with GT masks, skip instances with fewer
-            visible pixels (0: register all). progress: tqdm bar. indices: explicit image indices.
+            visible pixels (0: register all). min_score: with predicted masks, skip detections scoring
+            below this. progress: tqdm bar. indices: explicit image indices.
     Returns:
         one :class:`ResultRow` per instance (per prediction with predicted masks), in image order.
     """
@@ -211,7 +214,7 @@ def run_registration(
     if limit is not None:
         idx = idx[:limit]
     cfgd = {k: v for k, v in asdict(cfg).items()}
-    args = (str(data), split, method, icp, cfgd, str(masks), int(min_px))
+    args = (str(data), split, method, icp, cfgd, str(masks), int(min_px), float(min_score))
     rows: list[ResultRow] = []
     bar = tqdm(total=len(idx), desc=f"register {method}{'+icp' if icp else ''}", unit="img", disable=not progress)
     if workers <= 1 or len(idx) <= 1:

@@ -54,14 +54,22 @@ class ColourGrid:
     centroid: np.ndarray
     time: float = 0.0
 
-    def lookup(self, q: np.ndarray):
-        """(dist, sharp, smooth) at points ``q`` (..., 3); points outside the grid get dist = inf."""
-        ijk = np.floor((q - self.origin) / self.cell).astype(np.int64)
-        inside = ((ijk >= 0) & (ijk < self.shape)).all(axis=-1)
-        ijk = np.clip(ijk, 0, self.shape - 1)
-        flat = (ijk[..., 0] * self.shape[1] + ijk[..., 1]) * self.shape[2] + ijk[..., 2]
-        d = np.where(inside, self.dist[flat], np.inf)
-        return d, self.sharp[flat], self.smooth[flat]
+    def __post_init__(self):
+        self._w: dict = {}
+
+    def cells_of(self, q: np.ndarray) -> np.ndarray:
+        """Flat cell indices of points ``q`` (..., 3); points outside the grid map to a border cell
+        (whose distance is set to inf at build time)."""
+        ijk = ((q - self.origin) * (1.0 / self.cell)).astype(np.int32)
+        np.clip(ijk, 0, self.shape - 1, out=ijk)
+        return (ijk[..., 0] * int(self.shape[1]) + ijk[..., 1]) * int(self.shape[2]) + ijk[..., 2]
+
+    def weights(self, sigma: float) -> np.ndarray:
+        """Per-cell soft surface agreement ``exp(-d^2 / 2 sigma^2)`` (float32, cached per sigma)."""
+        key = round(float(sigma), 9)
+        if key not in self._w:
+            self._w[key] = np.exp(-0.5 * np.minimum(self.dist / sigma, 10.0) ** 2).astype(np.float32)
+        return self._w[key]
 
 
 def build_grid(points: np.ndarray, colors: np.ndarray, diameter: float, cells: int = 64, smooth_rel: float = 0.1) -> ColourGrid:
@@ -83,7 +91,10 @@ def build_grid(points: np.ndarray, colors: np.ndarray, diameter: float, cells: i
     ch = chroma(colors)
     d, nn = cKDTree(points).query(centres, k=1, distance_upper_bound=0.2 * diameter)
     far = ~np.isfinite(d)
-    d[far], nn[far] = np.inf, 0
+    nn[far] = 0
+    border = np.zeros(tuple(shape), dtype=bool)
+    border[[0, -1], :, :] = border[:, [0, -1], :] = border[:, :, [0, -1]] = True
+    d[far | border.reshape(-1)] = np.inf
     # smoothed chromaticity: Gaussian-filtered per-cell sums of the model points, read at the cell of
     # each grid cell's nearest model point
     ijk = np.clip(np.floor((points - lo) / cell).astype(np.int64), 0, shape - 1)
@@ -191,12 +202,14 @@ def colour_search(
     v_f = (P[sel_f] - t0) @ R0 - c  # object frame, relative to the centroid
     v_c = v_f[: len(sel)]
 
+    v_c32, v_f32, c32 = v_c.astype(np.float32), v_f.astype(np.float32), c.astype(np.float32)
+
     def score(S, smooth: bool, sigma: float):
         """combined score = colour correlation + geo_weight x soft surface agreement."""
-        q = np.einsum("kj,mji->mki", v_c if smooth else v_f, S) + c
-        d, sharp, sm = grid.lookup(q)
-        geo = np.exp(-0.5 * np.minimum(d / sigma, 10.0) ** 2).mean(axis=1)
-        col = _corr(fs_smooth, sm) if smooth else _corr(fs_sharp, sharp)
+        q = np.matmul(v_c32 if smooth else v_f32, S.astype(np.float32)) + c32  # (M, K, 3)
+        cells = grid.cells_of(q)
+        geo = grid.weights(sigma)[cells].mean(axis=1)
+        col = _corr(fs_smooth, grid.smooth[cells]) if smooth else _corr(fs_sharp, grid.sharp[cells])
         return col + geo_weight * geo, geo, col
 
     S = random_rotations(n_rot, seed)
