@@ -4,7 +4,8 @@ cloud, 2 mm reference voxels, Open3D tutorial RANSAC criteria), in the same run,
 
 Usage::
 
-    python benchmarks/registration.py [--data data/bench_val] [--split test] [--limit N] [--methods ransac,fgr,super4pcs]
+    python benchmarks/registration.py [--data data/bench_val] [--split test] [--limit N] [--stride K]
+        [--methods ransac,fgr,super4pcs] [--presets default,paper]
 
 Without ``--data`` the validation set is generated (if missing) by
 ``sixdpose.generation.ensure_dataset("data/bench_val", profile="bench_val")``. A BOP root works too.
@@ -29,6 +30,7 @@ def main(argv=None) -> int:
     ap.add_argument("--data", default=None, help="dataset (default: generate data/bench_val)")
     ap.add_argument("--split", default="test")
     ap.add_argument("--limit", type=int, default=None, help="only the first N images")
+    ap.add_argument("--stride", type=int, default=1, help="only every N-th image (a fixed subset over all scenes)")
     ap.add_argument("--methods", default="ransac,fgr,super4pcs")
     ap.add_argument("--presets", default="default,paper")
     ap.add_argument("--min-px", type=int, default=400)
@@ -48,6 +50,7 @@ def main(argv=None) -> int:
 
         ensure_dataset(data, profile="bench_val")
     ds = open_dataset(data, split=args.split)
+    indices = range(0, len(ds), args.stride) if args.stride > 1 else None
     table = []
     for preset in args.presets.split(","):
         cfg = get_preset(preset)
@@ -55,7 +58,7 @@ def main(argv=None) -> int:
             for icp in (False, True):
                 t0 = time.perf_counter()
                 rows = run_registration(data, method, icp=icp, split=args.split, cfg=cfg, workers=1, limit=args.limit,
-                                        min_px=args.min_px, progress=False)
+                                        min_px=args.min_px, progress=False, indices=indices)
                 wall = time.perf_counter() - t0
                 ests = [Estimate(r.scene_id, r.im_id, r.obj_id, r.score, r.R, r.t, r.time) for r in rows]
                 res = evaluate(ds, ests, min_px=args.min_px)

@@ -8,13 +8,12 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
-from conftest import REPO, tree_digest
+from conftest import tree_digest
 from sixdpose.constants import MERGED_MASK_CODES, TARGET_OBJECTS
 
 pytestmark = pytest.mark.slow

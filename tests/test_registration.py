@@ -12,8 +12,8 @@ from sixdpose.registration import geometry
 from sixdpose.registration.geometry import ReferenceCache, backproject
 from sixdpose.registration.methods import estimate_pose
 from sixdpose.registration.presets import PRESETS, get_preset
-from sixdpose.registration.runner import load_predicted_masks, run_registration, write_results
-from test_reg_helpers import K_SMALL, YCBV, write_synthetic_dataset
+from sixdpose.registration.runner import load_predicted_masks, run_registration
+from test_reg_helpers import YCBV, write_synthetic_dataset
 
 needs_ycbv = pytest.mark.skipif(not YCBV.is_dir(), reason="shared/data/ycbv_sample not available")
 

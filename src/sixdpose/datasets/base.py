@@ -90,6 +90,23 @@ def collate_samples(batch: list[Sample]) -> list[Sample]:
     return list(batch)
 
 
+def read_image(path: str | Path) -> np.ndarray:
+    """Read an image file (PNG, JPEG, 16-bit PNG) into a numpy array.
+
+    Raises:
+        DatasetError: naming the file, if it is missing or not a readable image.
+    """
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            return np.asarray(im).copy()
+    except FileNotFoundError:
+        raise DatasetError(f"{path}: file not found") from None
+    except Exception as e:  # PIL raises several types for truncated / non-image files
+        raise DatasetError(f"{path}: unreadable image ({e})") from None
+
+
 def read_ply(path: str | Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
     """Read a PLY point cloud or mesh (ascii or binary little endian) with Open3D.
 

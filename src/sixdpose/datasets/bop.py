@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .base import DatasetError, Instance, ObjectModel, Sample
+from .base import DatasetError, Instance, ObjectModel, Sample, read_image
 
 log = logging.getLogger(__name__)
 
@@ -46,18 +46,6 @@ def load_json(path: Path):
         return json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise DatasetError(f"{path}: corrupt JSON ({e})") from None
-
-
-def _read_image(path: Path) -> np.ndarray:
-    from PIL import Image
-
-    try:
-        with Image.open(path) as im:
-            return np.asarray(im).copy()
-    except FileNotFoundError:
-        raise DatasetError(f"{path}: file not found") from None
-    except Exception as e:  # PIL raises several types for truncated / non-image files
-        raise DatasetError(f"{path}: unreadable image ({e})") from None
 
 
 def _is_symmetric(info: dict) -> bool:
@@ -172,7 +160,7 @@ class BopDataset:
         d = self._scene_dirs[scene_id]
         if im_id not in self._gt[scene_id]:
             raise DatasetError(f"{d / 'scene_gt.json'}: no image {im_id}")
-        rgb = _read_image(self._rgb_path(scene_id, im_id))
+        rgb = read_image(self._rgb_path(scene_id, im_id))
         if rgb.ndim == 2:
             rgb = np.repeat(rgb[..., None], 3, axis=2)
         rgb = rgb[..., :3].astype(np.uint8, copy=False)
@@ -184,7 +172,7 @@ class BopDataset:
         depth = None
         dpath = d / "depth" / f"{im_id:06d}.png"
         if (d / "depth").is_dir():
-            raw = _read_image(dpath)
+            raw = read_image(dpath)
             if raw.ndim != 2:
                 raise DatasetError(f"{dpath}: expected a single-channel 16-bit depth image")
             if raw.shape != rgb.shape[:2]:
@@ -210,7 +198,7 @@ class BopDataset:
                 px = int(infos[k]["px_count_visib"])
             mask = None
             if masks:
-                m = _read_image(d / "mask_visib" / f"{im_id:06d}_{k:06d}.png")
+                m = read_image(d / "mask_visib" / f"{im_id:06d}_{k:06d}.png")
                 mask = (m if m.ndim == 2 else m[..., 0]) > 0
                 if px < 0:
                     px = int(mask.sum())

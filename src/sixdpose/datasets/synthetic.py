@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .base import DatasetError, Instance, ObjectModel, Sample, read_ply
+from .base import DatasetError, Instance, ObjectModel, Sample, read_image, read_ply
 
 try:  # fast YAML if libyaml is present
     _Loader = yaml.CSafeLoader
@@ -38,19 +38,6 @@ def load_yaml(path: Path):
             return yaml.load(f, Loader=_Loader)
     except yaml.YAMLError as e:
         raise DatasetError(f"{path}: corrupt YAML ({str(e).splitlines()[0]})") from None
-
-
-def read_png(path: Path) -> np.ndarray:
-    """Read a PNG into a numpy array, raising :class:`DatasetError` naming the file on failure."""
-    from PIL import Image
-
-    try:
-        with Image.open(path) as im:
-            return np.asarray(im).copy()
-    except FileNotFoundError:
-        raise DatasetError(f"{path}: file not found") from None
-    except Exception as e:  # PIL raises several types for truncated / non-image files
-        raise DatasetError(f"{path}: unreadable image ({e})") from None
 
 
 class SyntheticDataset:
@@ -104,7 +91,7 @@ class SyntheticDataset:
         if im_id not in self.gt:
             raise DatasetError(f"{self.root / 'gt.yml'}: no image {im_id}")
         entry = self.gt[im_id]
-        rgb = read_png(self.root / "RGB" / f"{im_id}.png")
+        rgb = read_image(self.root / "RGB" / f"{im_id}.png")
         if rgb.ndim != 3:
             raise DatasetError(f"{self.root / 'RGB' / f'{im_id}.png'}: expected an RGB image")
         rgb = rgb[..., :3]
@@ -137,14 +124,14 @@ class SyntheticDataset:
             except (KeyError, ValueError, TypeError) as e:
                 raise DatasetError(f"{self.root / 'gt.yml'}: image {im_id} object {k}: bad field ({e})") from None
             if masks:
-                m = read_png(self.root / "masks" / name / f"{im_id}_{inst.inst}.png")
+                m = read_image(self.root / "masks" / name / f"{im_id}_{inst.inst}.png")
                 inst.mask = m > 0 if m.ndim == 2 else m[..., 0] > 0
             insts.append(inst)
         return Sample(int(entry["scene_id"]), im_id, rgb, depth, K, insts)
 
     def merged_mask(self, im_id: int) -> np.ndarray:
         """The paper's merged mask of image ``im_id`` (uint8, value = code - instance)."""
-        return read_png(self.root / "merged_masks" / f"{im_id}.png")
+        return read_image(self.root / "merged_masks" / f"{im_id}.png")
 
     # -- models -----------------------------------------------------------------------------
     @property

@@ -38,7 +38,7 @@ def _run(args) -> int:
     ds = open_dataset(args.data, split=args.split, **kw)
     res = evaluate(ds, ests, min_px=args.min_px, threshold=args.threshold, progress=True)
     out = Path(args.out) if args.out else res_path.with_name(res_path.stem + "_eval")
-    paths = write_tables(res, out, label=args.label or res_path.stem)
+    write_tables(res, out, label=args.label or res_path.stem)
     print(f"ADD(-S) accuracy {res.accuracy:.2f}% ({res.n_correct}/{res.n_gt} GT instances; mean over objects "
           f"{res.mean_object_accuracy:.2f}%), {res.fps:.3f} FPS, {res.instances_per_s:.3f} instances/s -> {out}")
     for oid, v in res.per_object.items():

@@ -206,7 +206,7 @@ def write_tables(res: EvalResult, out_dir: str | Path, label: str = "method") ->
     lines = [
         "\\begin{tabular}{lrr}",
         "\\toprule",
-        f"Object & GT instances & ADD(-S) (\\%) \\\\",
+        "Object & GT instances & ADD(-S) (\\%) \\\\",
         "\\midrule",
     ]
     for oid, v in res.per_object.items():

@@ -7,7 +7,6 @@ The unit of work is a scene, seeded from ``(seed, scene index)``; image numbers 
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import resource
 import shutil
@@ -89,7 +88,6 @@ def render_scene(root: Path, cfg: GenerationConfig, assets_dir: Path, scene: int
             res = sim.settle()
             if res.at_rest:
                 break
-            del sim
         else:
             raise RuntimeError(f"not at rest after {cfg.sim_time} s in {cfg.max_attempts} attempts")
         views, images = {}, []

@@ -282,8 +282,6 @@ class PoolRenderer:
         from pydrake.geometry import FramePoseVector, Mesh
 
         if self._diagram is None:
-            from ..constants import TARGET_OBJECTS  # noqa: F401  (names come from the catalogue below)
-
             self._ensure_frames(mesh_paths_all(mesh_paths))
             self._diagram = self._builder.Build()
             self._context = self._diagram.CreateDefaultContext()

@@ -30,6 +30,7 @@ def register(sub) -> None:
                    help="override one preset field, e.g. --set s4pcs_samples=300 (repeatable)")
     p.add_argument("--workers", type=int, default=2, help="processes (default 2)")
     p.add_argument("--limit", type=int, default=None, help="only the first N images")
+    p.add_argument("--stride", type=int, default=1, help="only every N-th image (a fixed subset spread over the scenes)")
     p.add_argument("--min-px", type=int, default=0, help="with GT masks, skip instances with fewer visible pixels")
     p.add_argument("--min-score", type=float, default=0.5,
                    help="with predicted masks, skip detections whose score is below this (default 0.5)")
@@ -49,9 +50,19 @@ def _run(args) -> int:
         raise UserError(str(e)) from None
     if args.workers < 1:
         raise UserError("--workers must be >= 1")
+    if args.stride < 1:
+        raise UserError("--stride must be >= 1")
+    indices = None
+    if args.stride > 1:
+        from ..datasets.base import open_dataset
+
+        try:
+            indices = range(0, len(open_dataset(args.data, split=args.split)), args.stride)
+        except Exception:  # an unreadable dataset is reported by run_registration below
+            indices = None
     rows = run_registration(args.data, args.method, icp=args.icp, masks=args.masks, split=args.split, cfg=cfg,
                             workers=args.workers, limit=args.limit, min_px=args.min_px,
-                            min_score=args.min_score, progress=not args.no_progress)
+                            min_score=args.min_score, progress=not args.no_progress, indices=indices)
     write_results(rows, args.out)
     n_bad = sum(1 for r in rows if r.reason)
     print(f"wrote {len(rows)} estimates ({n_bad} with score 0) to {args.out}")

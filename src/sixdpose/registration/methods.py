@@ -172,6 +172,7 @@ def register_super4pcs(scene: SceneCloud, ref: Reference, cfg: RegistrationConfi
         normal_tol_deg=cfg.s4pcs_normal_tol_deg,
         stop_lcp=cfg.s4pcs_stop_lcp,
         max_candidates=cfg.s4pcs_max_candidates,
+        max_pairs=cfg.s4pcs_max_pairs,
         seed=cfg.seed,
         Q_verify=None if ver is None else ver[0],
         Qn_verify=None if ver is None else ver[1],
@@ -285,9 +286,12 @@ def estimate_pose(
             from .verify import colour_search
 
             t0 = time.perf_counter()
-            res = colour_search(T, points, colors, grid, ref.diameter, n_rot=cfg.cv_rotations, n_points=cfg.cv_points,
-                                tol_rel=cfg.cv_tol_rel, geo_margin=cfg.cv_geo_margin, smooth_rel=cfg.cv_smooth_rel,
-                                n_refine=cfg.cv_refine, seed=cfg.seed)
+            res = colour_search(
+                T, points, colors, grid, ref.diameter, n_rot=cfg.cv_rotations, n_points=cfg.cv_points,
+                n_points_fine=cfg.cv_points_fine, tol_rel=cfg.cv_tol_rel, coarse_sigma_rel=cfg.cv_coarse_sigma_rel,
+                geo_weight=cfg.cv_geo_weight, smooth_rel=cfg.cv_smooth_rel, n_keep=cfg.cv_keep, n_refine=cfg.cv_refine,
+                n_pert=cfg.cv_perturbations, refine_deg=cfg.cv_refine_deg, min_gain=cfg.cv_min_gain, seed=cfg.seed,
+            )
             info.update(colour_changed=res.changed, colour_corr=res.col)
             if res.changed:
                 T = res.T

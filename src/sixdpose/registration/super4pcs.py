@@ -246,6 +246,7 @@ def super4pcs(
     pair_tol_factor: float = 1.0,
     refine: bool = False,
     seed: int = 0,
+    max_q: int | None = 1000,
     Q_verify: np.ndarray | None = None,
     Qn_verify: np.ndarray | None = None,
 ) -> Super4PCSResult:
@@ -272,6 +273,7 @@ def super4pcs(
             spacing)``.
         refine: re-fit the best transform once on its LCP inlier correspondences (least squares).
         seed: random seed (the result is deterministic for a given seed).
+        max_q: at most this many samples of ``Q`` (random subset; None: no limit).
         Q_verify, Qn_verify: denser target cloud for the LCP (default: ``Q``).
     Returns:
         :class:`Super4PCSResult` with ``T`` mapping ``P`` onto ``Q`` (identity and lcp 0 on failure).
@@ -289,6 +291,10 @@ def super4pcs(
         f4 = min(max(overlap, 0.05), 0.999) ** 4
         n_bases = int(math.ceil(math.log(1e-3) / math.log(1.0 - f4)))
     ip, iq, spacing = density_matched_samples(P, Q, n_samples, rng)
+    if max_q is not None and len(iq) > max_q:
+        # the smart index holds every pair of Q's samples (O(len(iq)^2)): when P covers a small part
+        # of a large model, thin Q's samples at random to bound that cost
+        iq = np.sort(rng.choice(iq, size=max_q, replace=False))
     # both clouds are sampled independently: a sample of Q can be up to ~spacing away from the point
     # matching a base point, so the pair tolerances cannot be tighter than that
     tol = max(delta, pair_tol_factor * spacing)

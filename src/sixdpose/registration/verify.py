@@ -6,17 +6,19 @@ geometric pose ``X_CO0`` (global registration + ICP), :func:`colour_search` scor
 rotations ``S`` of the model about its centroid ``c`` (the candidate pose is ``X_CO0 * A`` with
 ``A(x) = S (x - c) + c``) by
 
-* ``geo``: the fraction of scene points within ``tol`` of the model surface, and
+* ``geo``: the soft fraction of scene points on the model surface (mean of ``exp(-d^2 / 2 sigma^2)``,
+  ``d`` the distance to the nearest model point), and
 * ``col``: the correlation between the scene points' chromaticity and the model's chromaticity at
   the nearest model point (chromaticity ``rgb / (r + g + b + 0.05)`` minus its mean: insensitive to
   the shading, which only scales the intensity).
 
 Both are looked up in a per-object voxel grid (distance to the surface, smoothed and sharp model
 chromaticity; :class:`ColourGrid`, built once per object and cached), so thousands of rotations cost
-milliseconds. The candidates whose ``geo`` is within ``geo_margin`` of the best are ranked by
-``col`` on *smoothed* colours (a wide basin: about 20 degrees), and the best few are refined by
-local rotation perturbations of decreasing size scored on *sharp* colours. The result is kept only
-if it beats the input pose's own score.
+milliseconds. The score is ``col + geo_weight * geo``. A coarse pass ranks uniformly random rotations
+on *smoothed* colours (a wide basin, about 20 degrees) with a wide ``sigma``; the best few, at least
+``nms_deg`` apart (distinct basins), plus the input pose are refined by local rotation perturbations
+of decreasing size, first on smoothed colours, then on *sharp* colours with the fine ``sigma``. The
+result replaces the input pose only if it scores ``min_gain`` higher than the input pose itself.
 """
 
 from __future__ import annotations
@@ -42,7 +44,8 @@ class ColourGrid:
 
     Attributes:
         origin (3,), cell (m), shape (3,), dist (X*Y*Z,) float32, sharp, smooth (X*Y*Z, 3) float32,
-        centroid (3,) model centroid, time: seconds to build.
+        centroid (3,) model centroid; the grid is a cube around it, and points closer than ``radius``
+        to the centroid stay inside it under any rotation about it. time: seconds to build.
     """
 
     origin: np.ndarray
@@ -52,16 +55,15 @@ class ColourGrid:
     sharp: np.ndarray
     smooth: np.ndarray
     centroid: np.ndarray
+    radius: float
     time: float = 0.0
 
     def __post_init__(self):
         self._w: dict = {}
 
     def cells_of(self, q: np.ndarray) -> np.ndarray:
-        """Flat cell indices of points ``q`` (..., 3); points outside the grid map to a border cell
-        (whose distance is set to inf at build time)."""
+        """Flat cell indices of points ``q`` (..., 3) that lie inside the grid (not checked)."""
         ijk = ((q - self.origin) * (1.0 / self.cell)).astype(np.int32)
-        np.clip(ijk, 0, self.shape - 1, out=ijk)
         return (ijk[..., 0] * int(self.shape[1]) + ijk[..., 1]) * int(self.shape[2]) + ijk[..., 2]
 
     def weights(self, sigma: float) -> np.ndarray:
@@ -81,31 +83,37 @@ def build_grid(points: np.ndarray, colors: np.ndarray, diameter: float, cells: i
     """
     t0 = time.perf_counter()
     cell = diameter / cells
-    lo = points.min(axis=0) - 2 * cell
-    hi = points.max(axis=0) + 2 * cell
-    shape = np.ceil((hi - lo) / cell).astype(np.int64)
-    axes = [lo[k] + (np.arange(shape[k]) + 0.5) * cell for k in range(3)]
-    centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    from scipy.ndimage import gaussian_filter
+    centroid = points.mean(axis=0)
+    # a cube around the centroid holding the ball of radius ``half``: a point within ``half - cell``
+    # of the centroid stays inside for every rotation about it (no clipping while searching)
+    half = float(np.linalg.norm(points - centroid, axis=1).max()) + 3 * cell
+    n_side = int(np.ceil(2 * half / cell))
+    lo = centroid - 0.5 * n_side * cell
+    shape = np.array([n_side] * 3, dtype=np.int64)
+    from scipy.ndimage import binary_dilation, gaussian_filter
 
-    ch = chroma(colors)
-    d, nn = cKDTree(points).query(centres, k=1, distance_upper_bound=0.2 * diameter)
-    far = ~np.isfinite(d)
-    nn[far] = 0
-    border = np.zeros(tuple(shape), dtype=bool)
-    border[[0, -1], :, :] = border[:, [0, -1], :] = border[:, :, [0, -1]] = True
-    d[far | border.reshape(-1)] = np.inf
-    # smoothed chromaticity: Gaussian-filtered per-cell sums of the model points, read at the cell of
-    # each grid cell's nearest model point
+    n = int(np.prod(shape))
     ijk = np.clip(np.floor((points - lo) / cell).astype(np.int64), 0, shape - 1)
     flat = (ijk[:, 0] * shape[1] + ijk[:, 1]) * shape[2] + ijk[:, 2]
-    n = int(np.prod(shape))
+    # distances are only needed near the surface (the surface term vanishes beyond ~0.15 d)
+    occ = np.zeros(n, dtype=bool)
+    occ[flat] = True
+    near = binary_dilation(occ.reshape(tuple(shape)), iterations=int(np.ceil(0.15 * diameter / cell))).reshape(-1)
+    idx = np.flatnonzero(near)
+    ii, jj, kk = np.unravel_index(idx, tuple(shape))
+    centres = lo + (np.stack([ii, jj, kk], axis=1) + 0.5) * cell
+    ch = chroma(colors)
+    d = np.full(n, np.inf)
+    nn = np.zeros(n, dtype=np.int64)
+    d[idx], nn[idx] = cKDTree(points).query(centres, k=1)
+    # smoothed chromaticity: Gaussian-filtered per-cell sums of the model points, read at the cell of
+    # each grid cell's nearest model point
     sig = 0.5 * smooth_rel * diameter / cell  # about the spread of a ball of radius smooth_rel * d
     cnt = gaussian_filter(np.bincount(flat, minlength=n).reshape(shape).astype(np.float64), sig, mode="constant")
     sm = np.stack([gaussian_filter(np.bincount(flat, weights=ch[:, k], minlength=n).reshape(shape), sig, mode="constant")
                    for k in range(3)], axis=-1).reshape(n, 3) / np.maximum(cnt.reshape(n, 1), 1e-12)
     return ColourGrid(lo, cell, shape, d.astype(np.float32), ch[nn].astype(np.float32), sm[flat[nn]].astype(np.float32),
-                      points.mean(axis=0), time.perf_counter() - t0)
+                      centroid, half - cell, time.perf_counter() - t0)
 
 
 _ROT_CACHE: dict = {}
@@ -164,11 +172,13 @@ def colour_search(
     geo_weight: float = 1.0,
     smooth_rel: float = 0.1,
     n_keep: int = 8,
+    nms_deg: float = 30.0,
     n_refine: int = 4,
     n_pert: int = 48,
     refine_deg: float = 30.0,
     min_gain: float = 0.0,
     seed: int = 0,
+    debug: dict | None = None,
 ) -> SearchResult:
     """Search the rotations of the model about its centroid for the best colour agreement.
 
@@ -180,7 +190,7 @@ def colour_search(
         tol_rel: surface tolerance (Gaussian sigma) / diameter of the fine surface term.
         coarse_sigma_rel: the same for the coarse search. geo_weight: weight of the surface term
         (in [0, 1]) against the colour correlation (in [-1, 1]). smooth_rel: colour smoothing radius
-        / diameter. n_keep: coarse candidates refined. n_refine, n_pert, refine_deg: refinement
+        / diameter. n_keep: coarse candidates refined, at least ``nms_deg`` apart. n_refine, n_pert, refine_deg: refinement
         rounds of ``n_pert`` perturbations of at most ``refine_deg`` (halved each round).
         min_gain: the best candidate replaces ``T0`` only if it scores this much higher. seed.
     Returns:
@@ -200,7 +210,16 @@ def colour_search(
     R0, t0 = T0[:3, :3], T0[:3, 3]
     c = grid.centroid
     v_f = (P[sel_f] - t0) @ R0 - c  # object frame, relative to the centroid
-    v_c = v_f[: len(sel)]
+    # points beyond the grid's radius cannot lie on the model under any rotation about the
+    # centroid: they count as misses (surface term) and are left out of the colour correlation
+    inside = np.linalg.norm(v_f, axis=1) < grid.radius
+    frac_f = inside.mean()
+    frac_c = inside[: len(sel)].mean()
+    keep_c = inside[: len(sel)]
+    v_c, fs_smooth = v_f[: len(sel)][keep_c], fs_smooth[keep_c]
+    v_f, fs_sharp = v_f[inside], fs_sharp[inside]
+    if len(v_c) < 4 or len(v_f) < 4:
+        return SearchResult(T0, 0.0, 0.0, False)
 
     v_c32, v_f32, c32 = v_c.astype(np.float32), v_f.astype(np.float32), c.astype(np.float32)
 
@@ -208,21 +227,37 @@ def colour_search(
         """combined score = colour correlation + geo_weight x soft surface agreement."""
         q = np.matmul(v_c32 if smooth else v_f32, S.astype(np.float32)) + c32  # (M, K, 3)
         cells = grid.cells_of(q)
-        geo = grid.weights(sigma)[cells].mean(axis=1)
+        geo = grid.weights(sigma)[cells].mean(axis=1) * (frac_c if smooth else frac_f)
         col = _corr(fs_smooth, grid.smooth[cells]) if smooth else _corr(fs_sharp, grid.sharp[cells])
         return col + geo_weight * geo, geo, col
 
     S = random_rotations(n_rot, seed)
     sc, geo, col = score(S, True, coarse_sigma_rel * diameter)
-    order = np.argsort(-sc)[:n_keep]
-    best = np.concatenate([np.eye(3)[None], S[order]])
+    # the best n_keep coarse rotations at least nms_deg apart (distinct basins, e.g. both poses of
+    # a 180-degree colour near-symmetry), plus the input pose itself
+    cos_min = 2.0 * math.cos(math.radians(nms_deg)) + 1.0  # trace(Ra^T Rb) above this: closer than nms_deg
+    kept: list[int] = []
+    for i in np.argsort(-sc)[: 50 * n_keep]:
+        if not kept or (np.einsum("ij,mij->m", S[i], S[kept]) < cos_min).all():
+            kept.append(int(i))
+            if len(kept) == n_keep:
+                break
+    best = np.concatenate([np.eye(3)[None], S[kept]])
+    if debug is not None:
+        debug["coarse"] = best.copy()
     sigma = tol_rel * diameter
-    best_s, _, _ = score(best, False, sigma)
+    sigma_c = coarse_sigma_rel * diameter
+    # local refinement: the first rounds on smoothed colours (wide basin), the rest on sharp ones
     ang = refine_deg
-    for _ in range(n_refine):
+    n_smooth = n_refine // 2
+    for r in range(n_refine):
+        smooth = r < n_smooth
+        sg = sigma_c if smooth else sigma
+        if r == 0 or r == n_smooth:
+            best_s, _, _ = score(best, smooth, sg)
         pert = _small_rotations(n_pert, ang, rng)
         trial = np.einsum("mij,pjk->mpik", best, pert).reshape(-1, 3, 3)
-        s2, _, _ = score(trial, False, sigma)
+        s2, _, _ = score(trial, smooth, sg)
         s2 = s2.reshape(len(best), -1)
         k = np.argmax(s2, axis=1)
         rows = np.arange(len(best))
@@ -230,6 +265,10 @@ def colour_search(
         best[better] = trial.reshape(len(best), -1, 3, 3)[rows[better], k[better]]
         best_s[better] = s2[rows[better], k[better]]
         ang /= 2.0
+    if n_refine <= n_smooth:
+        best_s, _, _ = score(best, False, sigma)
+    if debug is not None:
+        debug["refined"], debug["scores"] = best.copy(), best_s.copy()
     s0, g0, c0 = score(np.eye(3)[None], False, sigma)
     m = int(np.argmax(best_s))
     if best_s[m] <= s0[0] + min_gain:
