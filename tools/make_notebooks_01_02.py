@@ -5,8 +5,10 @@ import nbformat as nbf
 PARAMS = '''# Parameters (papermill overrides these; SIXDPOSE_PROFILE=smoke is the CI / small switch)
 import os
 PROFILE = os.environ.get("SIXDPOSE_PROFILE", "smoke")  # smoke (CI), demo (laptop CPU), paper (25,000 images)
-DATA = os.environ.get("SIXDPOSE_DATA") or f"../data/{PROFILE}"
+DATA = None  # None: $SIXDPOSE_DATA, else ../data/<PROFILE>
 FIGURES = "../figures"
+'''
+RESOLVE = '''DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{PROFILE}"  # after papermill's injected values
 '''
 
 
@@ -30,7 +32,7 @@ nb01 = nb([
            "the physics until everything rests, and renders 20 RGB-D views along a random camera arc. "
            "The output follows the paper's layout (section III-C); see `sixdpose.datasets.synthetic`."),
     ("code", PARAMS + "SCENES = None  # None: the profile's number of scenes\nVIEWS = None\nSEED = 0\nWORKERS = 2\n", "parameters"),
-    ("code", "from pathlib import Path\n\nimport matplotlib\nmatplotlib.use(\"Agg\")\nimport matplotlib.pyplot as plt\n\n"
+    ("code", RESOLVE + "from pathlib import Path\n\nimport matplotlib\nmatplotlib.use(\"Agg\")\nimport matplotlib.pyplot as plt\n\n"
              "from sixdpose.datasets import open_dataset\nfrom sixdpose.datasets.viz import plot_views\n"
              "from sixdpose.generation import generate, profile\n\nPath(FIGURES).mkdir(parents=True, exist_ok=True)"),
     ("md", "Generate (or finish an interrupted run: completed scenes are kept)."),
@@ -49,7 +51,7 @@ nb02 = nb([
     ("md", "# 02 · Dataset overview\n\nThe paper's Fig. 3 (nine random images), the ground truth drawn over the "
            "images, and the dataset's statistics against the claims of section III."),
     ("code", PARAMS + "SEED = 0\n", "parameters"),
-    ("code", "import csv\nfrom pathlib import Path\n\nimport matplotlib\nmatplotlib.use(\"Agg\")\nimport matplotlib.pyplot as plt\nimport numpy as np\n\n"
+    ("code", RESOLVE + "import csv\nfrom pathlib import Path\n\nimport matplotlib\nmatplotlib.use(\"Agg\")\nimport matplotlib.pyplot as plt\nimport numpy as np\n\n"
              "from sixdpose.datasets import open_dataset\nfrom sixdpose.datasets.stats import claims_table, dataset_statistics, plot_statistics\n"
              "from sixdpose.datasets.viz import plot_gt_projection, plot_views\nfrom sixdpose.generation import ensure_dataset\n\n"
              "ensure_dataset(DATA, profile=PROFILE)\nds = open_dataset(DATA)\nPath(FIGURES).mkdir(parents=True, exist_ok=True)\nrng = np.random.default_rng(SEED)"),
