@@ -155,3 +155,29 @@ def test_segmenter_batched_equals_single(seg_data, trained):
             union = (a["masks"] | b["masks"]).sum()
             assert inter / max(union, 1) > 0.99
     assert not math.isnan(float(seg.cfg.score_thresh))
+
+
+@pytest.mark.slow
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")
+def test_hybrid_runner_reads_segment_output(seg_data, trained, predicted, tmp_path):
+    """``sixdpose register --masks PRED_DIR`` consumes what ``segment`` wrote: one row per detection
+    at or above --min-score, on the images segment covered."""
+    from sixdpose.cli import main
+    from sixdpose.registration.runner import load_predicted_masks
+    from sixdpose.segmentation import load_prediction
+
+    out, _ = predicted
+    keys = [tuple(k) for k in json.loads((trained[0] / "split.json").read_text())["train"]["keys"]]
+    expected = 0
+    for s, i in keys:
+        dets = load_predicted_masks(out, s, i)
+        p = load_prediction(out, s, i)
+        assert [d[0] for d in dets] == p["labels"].tolist()
+        assert all(np.array_equal(d[2], m) for d, m in zip(dets, p["masks"]))
+        expected += int((p["scores"] >= 0.3).sum())
+    csv = tmp_path / "pred_rows.csv"
+    assert main(["register", "--data", str(seg_data), "--method", "fgr", "--masks", str(out), "--min-score", "0.3",
+                 "--out", str(csv), "--workers", "1", "--no-progress"]) == 0
+    rows = csv.read_text().strip().splitlines()[1:]
+    assert len(rows) == expected and expected > 0
+    assert {(int(r.split(",")[0]), int(r.split(",")[1])) for r in rows} <= set(keys)

@@ -43,16 +43,21 @@ def draw_pose(ax, sample: Sample, points_O: np.ndarray, R: np.ndarray, t: np.nda
     ax.scatter(uv[ok, 0], uv[ok, 1], s=s, c=color, linewidths=0)
 
 
-def plot_views(samples: list[Sample], ncols: int = 3, masks: bool = True, title: str | None = None):
-    """A grid of images (with masks if ``masks``), e.g. one scene's views or the paper's Fig. 3."""
+def _grid(n: int, ncols: int, cell: tuple[float, float]):
+    """A figure with ``n`` image axes (axis lines off) in rows of ``ncols``; returns (fig, axes list)."""
     import matplotlib.pyplot as plt
 
-    n = len(samples)
-    nrows = int(np.ceil(n / ncols))
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4 * ncols, 3 * nrows), squeeze=False)
+    nrows = max(1, int(np.ceil(n / ncols)))
+    fig, axes = plt.subplots(nrows, ncols, figsize=(cell[0] * ncols, cell[1] * nrows), squeeze=False)
     for ax in axes.ravel():
         ax.axis("off")
-    for ax, s in zip(axes.ravel(), samples):
+    return fig, list(axes.ravel())
+
+
+def plot_views(samples: list[Sample], ncols: int = 3, masks: bool = True, title: str | None = None):
+    """A grid of images (with masks if ``masks``), e.g. one scene's views or the paper's Fig. 3."""
+    fig, axes = _grid(len(samples), ncols, (4, 3))
+    for ax, s in zip(axes, samples):
         ax.imshow(overlay_masks(s) if masks else s.rgb)
         ax.set_title(f"image {s.im_id} (scene {s.scene_id}), {len(s.instances)} targets", fontsize=8)
     if title:
@@ -67,14 +72,8 @@ def plot_gt_projection(samples: list[Sample], model_points: dict[int, np.ndarray
     Args:
         model_points: obj_id -> (N, 3) model points (metres, object frame).
     """
-    import matplotlib.pyplot as plt
-
-    n = len(samples)
-    nrows = int(np.ceil(n / ncols))
-    fig, axes = plt.subplots(nrows, ncols, figsize=(6 * ncols, 4.5 * nrows), squeeze=False)
-    for ax in axes.ravel():
-        ax.axis("off")
-    for ax, s in zip(axes.ravel(), samples):
+    fig, axes = _grid(len(samples), ncols, (6, 4.5))
+    for ax, s in zip(axes, samples):
         ax.imshow(s.rgb)
         for c, inst in zip(_colors(len(s.instances)), s.instances):
             draw_pose(ax, s, model_points[inst.obj_id], inst.R, inst.t, color=[c])
