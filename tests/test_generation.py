@@ -97,7 +97,7 @@ def test_principal_point_convention(tiny_dataset, ycb_dir, smoke_config):
     import open3d as o3d
 
     from sixdpose.assets import load_catalog, load_mesh
-    from sixdpose.generation.checks import backproject
+    from sixdpose.datasets.geometry import backproject
 
     ds = SyntheticDataset(tiny_dataset)
     s = ds[0]
@@ -107,7 +107,7 @@ def test_principal_point_convention(tiny_dataset, ycb_dir, smoke_config):
     rs.add_triangles(o3d.core.Tensor(m.vertices.astype(np.float32)), o3d.core.Tensor(m.faces.astype(np.uint32)))
 
     def err(Kx):
-        p = (backproject(s.depth, Kx, inst.mask) - inst.t) @ inst.R
+        p = (backproject(s.depth, Kx, inst.mask)[0] - inst.t) @ inst.R
         return float(rs.compute_distance(o3d.core.Tensor(p.astype(np.float32))).numpy().mean())
 
     K_raw = K.copy()

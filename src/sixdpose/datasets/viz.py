@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Sample
+from .geometry import project
 
 
 def _colors(n: int) -> np.ndarray:
@@ -21,18 +22,6 @@ def overlay_masks(sample: Sample, alpha: float = 0.5) -> np.ndarray:
         if inst.mask is not None:
             img[inst.mask] = (1 - alpha) * img[inst.mask] + alpha * c
     return (img * 255).round().astype(np.uint8)
-
-
-def project(points_O: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Project object points (N, 3) at pose (R, t) with intrinsics K.
-
-    Returns:
-        uv (N, 2) pixel coordinates (integer-centre convention) and depth z (N,) in metres.
-    """
-    p_C = points_O @ R.T + t
-    z = p_C[:, 2]
-    uv = (p_C @ K.T)[:, :2] / np.maximum(z[:, None], 1e-9)
-    return uv, z
 
 
 def draw_pose(ax, sample: Sample, points_O: np.ndarray, R: np.ndarray, t: np.ndarray, color="lime", n: int = 1500, s: float = 0.5):

@@ -4,12 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-
-def project(points: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """Project (N, 3) object-frame points (metres) at pose (R, t) with intrinsics K; returns (N, 2) (u, v)."""
-    pc = points @ R.T + t
-    z = np.maximum(pc[:, 2:3], 1e-9)
-    return (pc[:, :2] / z) * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
+from ..datasets.geometry import project
 
 
 def draw_pose(ax, rgb: np.ndarray, K: np.ndarray, points: np.ndarray, poses, title: str = "", max_points: int = 1500):
@@ -22,7 +17,7 @@ def draw_pose(ax, rgb: np.ndarray, K: np.ndarray, points: np.ndarray, poses, tit
     rng = np.random.default_rng(0)
     sel = points[rng.choice(len(points), min(len(points), max_points), replace=False)]
     for R, t, color, label in poses:
-        uv = project(sel, R, t, K)
+        uv, _ = project(sel, R, t, K)
         ax.scatter(uv[:, 0], uv[:, 1], s=0.3, c=color, alpha=0.5, label=label)
     ax.set_xlim(0, rgb.shape[1])
     ax.set_ylim(rgb.shape[0], 0)

@@ -7,13 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..assets import load_catalog, load_mesh, resolve_assets_dir
-
-
-def backproject(depth: np.ndarray, K: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Points p_C (N, 3) metres of the pixels in ``mask`` with valid depth (> 0, finite)."""
-    v, u = np.nonzero(mask & np.isfinite(depth) & (depth > 0))
-    z = depth[v, u].astype(np.float64)
-    return np.stack([(u - K[0, 2]) * z / K[0, 0], (v - K[1, 2]) * z / K[1, 1], z], axis=1)
+from ..datasets.geometry import backproject
 
 
 def gt_surface_errors(dataset_dir: str | Path, assets: str | Path | None = None, max_images: int | None = None) -> list[dict]:
@@ -39,7 +33,7 @@ def gt_surface_errors(dataset_dir: str | Path, assets: str | Path | None = None,
                 rs = o3d.t.geometry.RaycastingScene()
                 rs.add_triangles(o3d.core.Tensor(m.vertices.astype(np.float32)), o3d.core.Tensor(m.faces.astype(np.uint32)))
                 scenes[inst.obj_name] = rs
-            p_C = backproject(s.depth, s.K, inst.mask)
+            p_C = backproject(s.depth, s.K, inst.mask)[0]
             if len(p_C) == 0:
                 continue
             p_O = (p_C - inst.t) @ inst.R  # R^T (p - t)

@@ -15,45 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-
-def backproject(
-    depth: np.ndarray, K: np.ndarray, mask: np.ndarray | None = None, rgb: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-    """Back-project the valid depth pixels under ``mask`` to camera-frame 3D points.
-
-    Args:
-        depth: (H, W) depth along the optical axis in metres; 0, negative, NaN or inf = no measurement.
-        K: (3, 3) intrinsics (pixel-centre convention: ``u = fx * x / z + cx``).
-        mask: optional (H, W) bool mask of the pixels to use (default: all).
-        rgb: optional (H, W, 3) uint8 image for per-point colours.
-    Returns:
-        points (N, 3) float64 in metres (camera frame, OpenCV axes), colours (N, 3) float64 in [0, 1]
-        or ``None``, pixels (N, 2) int64 as (v, u) = (row, column).
-    Raises:
-        ValueError: shapes do not agree.
-    """
-    depth = np.asarray(depth)
-    if depth.ndim != 2:
-        raise ValueError(f"depth must be (H, W), got shape {depth.shape}")
-    valid = np.isfinite(depth) & (depth > 0)
-    if mask is not None:
-        mask = np.asarray(mask, dtype=bool)
-        if mask.shape != depth.shape:
-            raise ValueError(f"mask shape {mask.shape} does not match depth shape {depth.shape}")
-        valid &= mask
-    v, u = np.nonzero(valid)
-    z = depth[v, u].astype(np.float64)
-    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    pts = np.empty((len(z), 3), dtype=np.float64)
-    pts[:, 0] = (u - cx) * z / fx
-    pts[:, 1] = (v - cy) * z / fy
-    pts[:, 2] = z
-    col = None
-    if rgb is not None:
-        if rgb.shape[:2] != depth.shape:
-            raise ValueError(f"rgb shape {rgb.shape} does not match depth shape {depth.shape}")
-        col = rgb[v, u, :3].astype(np.float64) / 255.0
-    return pts, col, np.stack([v, u], axis=1)
+from ..datasets.geometry import backproject  # noqa: F401  (re-exported: part of this stage's API)
 
 
 def to_o3d(points: np.ndarray, normals: np.ndarray | None = None, colors: np.ndarray | None = None):
