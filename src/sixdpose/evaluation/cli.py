@@ -17,6 +17,9 @@ def register(sub) -> None:
     p.add_argument("--threshold", type=float, default=0.1, help="correct if ADD(-S) < threshold x diameter")
     p.add_argument("--symmetric-ids", default=None,
                    help="BOP only: comma-separated obj_ids to treat as symmetric (overrides models_info.json)")
+    p.add_argument("--all-images", action="store_true",
+                   help="evaluate every image of the split (default: the images in the results); use it with "
+                        "predicted masks, where images without detections have no rows")
     p.add_argument("--label", default=None, help="method label for the tables (default: results file stem)")
     p.set_defaults(func=_run)
 
@@ -36,7 +39,8 @@ def _run(args) -> int:
         except ValueError:
             raise UserError(f"--symmetric-ids: expected comma-separated integers, got {args.symmetric_ids!r}") from None
     ds = open_dataset(args.data, split=args.split, **kw)
-    res = evaluate(ds, ests, min_px=args.min_px, threshold=args.threshold, progress=True)
+    res = evaluate(ds, ests, min_px=args.min_px, threshold=args.threshold, progress=True,
+                   images=ds.keys() if args.all_images else None)
     out = Path(args.out) if args.out else res_path.with_name(res_path.stem + "_eval")
     write_tables(res, out, label=args.label or res_path.stem)
     print(f"ADD(-S) accuracy {res.accuracy:.2f}% ({res.n_correct}/{res.n_gt} GT instances; mean over objects "

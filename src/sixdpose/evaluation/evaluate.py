@@ -96,15 +96,18 @@ class EvalResult:
         return {k: v for k, v in self.__dict__.items() if k not in ("per_object", "records")}
 
 
-def evaluate(dataset, estimates: list[Estimate], min_px: int = 400, threshold: float = 0.1, progress: bool = False) -> EvalResult:
+def evaluate(dataset, estimates: list[Estimate], min_px: int = 400, threshold: float = 0.1, progress: bool = False,
+             images=None) -> EvalResult:
     """Score ``estimates`` against ``dataset`` (see the module docstring for the protocol).
 
     Args:
-        dataset: a reader (:func:`~sixdpose.datasets.base.open_dataset`); only images that appear in
-            the results or in the dataset keys are read (every dataset image is evaluated: an image with
-            no estimate counts its GT instances as failures).
+        dataset: a reader (:func:`~sixdpose.datasets.base.open_dataset`).
         estimates: rows of :func:`load_results`. min_px: GT visibility threshold (pixels).
         threshold: fraction of the diameter (0.1).
+        images: the ``(scene_id, im_id)`` keys evaluated; an image without estimates counts its GT
+            instances as failures. ``None``: the images that appear in the results (every image if
+            there are none), which suits GT-mask runs on a subset; with predicted masks an image where
+            nothing was detected has no rows, so pass the registered images (or ``dataset.keys()``).
     Returns:
         :class:`EvalResult`.
     """
@@ -123,7 +126,14 @@ def evaluate(dataset, estimates: list[Estimate], min_px: int = 400, threshold: f
     n_ok_obj: dict[int, int] = defaultdict(int)
     records = []
     # only images with results are evaluated when the results cover a subset (e.g. --limit runs)
-    eval_keys = [k for k in keys if k in by_img] if by_img else keys
+    if images is not None:
+        want = {(int(a), int(b)) for a, b in images}
+        missing = sorted(want - known)
+        if missing:
+            raise DatasetError(f"images not in the dataset, e.g. scene {missing[0][0]} image {missing[0][1]}")
+        eval_keys = [k for k in keys if k in want]
+    else:
+        eval_keys = [k for k in keys if k in by_img] if by_img else keys
     pos = {k: i for i, k in enumerate(keys)}
     for key in tqdm(eval_keys, desc="evaluate", unit="img", disable=not progress):
         sample = _load_gt(dataset, pos[key])

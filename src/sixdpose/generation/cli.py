@@ -27,7 +27,7 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, help="output dataset directory")
     p.add_argument("--scenes", type=_nonneg_int, default=None, help="number of scenes (default: the profile's)")
     p.add_argument("--views", type=_nonneg_int, default=None, help="views per scene (default 20)")
-    p.add_argument("--seed", type=_nonneg_int, default=None, help="random seed (default 0)")
+    p.add_argument("--seed", type=_nonneg_int, default=None, help="random seed (default: the profile's; 0 for smoke, demo, paper)")
     p.add_argument("--profile", default="demo", choices=sorted(PROFILES), help="named config profile (default demo)")
     p.add_argument("--workers", type=_nonneg_int, default=1, help="parallel scene workers (default 1)")
     p.add_argument("--assets", default=None, help="YCB asset directory (default: $SIXDPOSE_YCB)")

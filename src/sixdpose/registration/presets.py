@@ -121,7 +121,7 @@ class RegistrationConfig:
     s4pcs_samples: int = 200
     s4pcs_bases: int | None = None
     s4pcs_normal_tol_deg: float | None = 25.0
-    s4pcs_stop_lcp: float = 0.8
+    s4pcs_stop_lcp: float = 0.9
     s4pcs_max_candidates: int = 10000
     s4pcs_max_pairs: int = 5000
     s4pcs_max_time: float | None = 0.5

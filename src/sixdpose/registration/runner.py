@@ -86,6 +86,10 @@ def _init_worker(data: str, split: str, method: str, icp: bool, cfg: dict, masks
 
     ds = open_dataset(data, split=split)
     _W.update(ds=ds, cache=ReferenceCache(ds), method=method, icp=icp, cfg=RegistrationConfig(**cfg), masks=masks, min_px=min_px, min_score=min_score)
+    if _W["cfg"].colour_verify:
+        from .verify import warmup
+
+        warmup()  # compile (or load from the on-disk cache) the Numba kernel now: a start-up cost, like imports
 
 
 def process_image(index: int) -> list[ResultRow]:

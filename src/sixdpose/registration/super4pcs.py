@@ -160,12 +160,16 @@ def _closest_line_params(a, b, c, d):
     return s, t, gap
 
 
-def select_base(P: np.ndarray, base_dist: float, planar_tol: float, rng: np.random.Generator, n_trials: int = 64):
+def select_base(P: np.ndarray, base_dist: float, planar_tol: float, rng: np.random.Generator, n_trials: int = 64,
+                width: float | None = None):
     """Pick a wide, nearly coplanar 4-point base of ``P`` whose diagonals cross.
 
     Args:
         P: (N, 3) sampled points. base_dist: largest wanted distance between base points (metres).
         planar_tol: largest allowed gap between the two diagonals (metres). n_trials: random triangles.
+        width: the cloud's extent across its main axis (metres; None: ``base_dist``). On thin,
+            elongated views (a marker, a knife, a screwdriver) the base is a thin quadrilateral: the
+            triangle's area and shortest side are judged against ``min(width, base_dist)``.
     Returns:
         ``(idx (4,), r1, r2)`` with diagonals ``P[idx[0]]P[idx[1]]`` and ``P[idx[2]]P[idx[3]]``, or
         ``None`` if no valid base was found.
@@ -177,8 +181,9 @@ def select_base(P: np.ndarray, base_dist: float, planar_tol: float, rng: np.rand
     a, b, c = P[tri[:, 0]], P[tri[:, 1]], P[tri[:, 2]]
     dab, dac, dbc = (np.linalg.norm(x - y, axis=1) for x, y in ((a, b), (a, c), (b, c)))
     area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    ok = (np.maximum(np.maximum(dab, dac), dbc) <= base_dist) & (np.minimum(np.minimum(dab, dac), dbc) > 0.3 * base_dist)
-    ok &= area > 0.12 * base_dist**2
+    w = base_dist if width is None else min(width, base_dist)
+    ok = (np.maximum(np.maximum(dab, dac), dbc) <= base_dist) & (np.minimum(np.minimum(dab, dac), dbc) > 0.3 * w)
+    ok &= area > 0.12 * base_dist * w
     # a random wide triangle (not the widest one: with outliers, the widest ones hold outliers)
     for k in rng.permutation(np.flatnonzero(ok))[:8]:
         ia, ib, ic = tri[k]
@@ -187,7 +192,7 @@ def select_base(P: np.ndarray, base_dist: float, planar_tol: float, rng: np.rand
         nrm /= np.linalg.norm(nrm)
         plane = np.abs((P - A) @ nrm)
         dmin = np.min(np.stack([np.linalg.norm(P - X, axis=1) for X in (A, B, C)]), axis=0)
-        cand = (plane < planar_tol) & (dmin > 0.25 * base_dist) & (np.linalg.norm(P - A, axis=1) <= base_dist)
+        cand = (plane < planar_tol) & (dmin > 0.25 * w) & (np.linalg.norm(P - A, axis=1) <= base_dist)
         if not cand.any():
             continue
         X = P[cand]
@@ -312,6 +317,10 @@ def super4pcs(
     ext = 2.0 * float(np.percentile(np.linalg.norm(Ps - np.median(Ps, axis=0), axis=1), 90))
     q_ext = 2.0 * float(np.max(np.linalg.norm(Qs - Qs.mean(axis=0), axis=1)))
     base_dist = max(overlap * min(ext, q_ext), 4 * delta)
+    # extent across the main axis (second principal direction), for thin elongated views
+    Pc = Ps - np.median(Ps, axis=0)
+    ax2 = np.linalg.svd(Pc - Pc.mean(axis=0), full_matrices=False)[2][1]
+    width = max(overlap * 2.0 * float(np.percentile(np.abs(Pc @ ax2), 90)), 2 * delta)
     sub = rng.choice(len(Ps), size=min(len(Ps), 48), replace=False)
 
     def lcp(R, t, idx):
@@ -330,7 +339,7 @@ def super4pcs(
     for _ in range(n_bases):
         if max_time is not None and time.perf_counter() - t0 > max_time:
             break
-        base = select_base(Ps, base_dist, planar_tol=max(delta * 0.5, 1e-4), rng=rng)
+        base = select_base(Ps, base_dist, planar_tol=max(delta * 0.5, 1e-4), rng=rng, width=width)
         if base is None:
             continue
         tried += 1

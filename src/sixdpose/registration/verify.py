@@ -27,6 +27,7 @@ import math
 import time
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -90,22 +91,29 @@ def build_grid(points: np.ndarray, colors: np.ndarray, diameter: float, cells: i
     n_side = int(np.ceil(2 * half / cell))
     lo = centroid - 0.5 * n_side * cell
     shape = np.array([n_side] * 3, dtype=np.int64)
-    from scipy.ndimage import binary_dilation, gaussian_filter
+    from scipy.ndimage import distance_transform_edt, gaussian_filter
 
     n = int(np.prod(shape))
     ijk = np.clip(np.floor((points - lo) / cell).astype(np.int64), 0, shape - 1)
     flat = (ijk[:, 0] * shape[1] + ijk[:, 1]) * shape[2] + ijk[:, 2]
-    # distances are only needed near the surface (the surface term vanishes beyond ~0.15 d)
+    # distance to the nearest model point: exact (KD-tree) within 4 cells of an occupied cell, where
+    # the fine surface term lives; farther out the distance between cell centres (Euclidean distance
+    # transform, error < 1 cell = d / cells), enough for the coarse term, which vanishes beyond ~0.15 d
     occ = np.zeros(n, dtype=bool)
     occ[flat] = True
-    near = binary_dilation(occ.reshape(tuple(shape)), iterations=int(np.ceil(0.15 * diameter / cell))).reshape(-1)
-    idx = np.flatnonzero(near)
+    edt, inds = distance_transform_edt(~occ.reshape(tuple(shape)), return_indices=True)
+    edt = edt.reshape(-1)
+    near_occ = (inds[0] * shape[1] + inds[1]).reshape(-1) * shape[2] + inds[2].reshape(-1)
+    # a representative model point per occupied cell (the last one written)
+    rep = np.zeros(n, dtype=np.int64)
+    rep[flat] = np.arange(len(points))
+    nn = rep[near_occ]
+    d = edt * cell
+    idx = np.flatnonzero(edt <= 4.0)
     ii, jj, kk = np.unravel_index(idx, tuple(shape))
     centres = lo + (np.stack([ii, jj, kk], axis=1) + 0.5) * cell
-    ch = chroma(colors)
-    d = np.full(n, np.inf)
-    nn = np.zeros(n, dtype=np.int64)
     d[idx], nn[idx] = cKDTree(points).query(centres, k=1)
+    ch = chroma(colors)
     # smoothed chromaticity: Gaussian-filtered per-cell sums of the model points, read at the cell of
     # each grid cell's nearest model point
     sig = 0.5 * smooth_rel * diameter / cell  # about the spread of a ball of radius smooth_rel * d
@@ -140,8 +148,64 @@ def _small_rotations(n: int, angle_deg: float, rng: np.random.Generator) -> np.n
     return Rotation.from_rotvec(ax * ang[:, None]).as_matrix()
 
 
+@numba.njit(cache=True, fastmath=True, nogil=True)
+def _score_kernel(v, S, c, origin, inv_cell, ny, nz, weights, feat, fs, out_geo, out_col):  # pragma: no cover - compiled
+    """For each rotation ``S[m]``: rotate the points ``v`` (K, 3; object frame about the centroid
+    ``c``) as ``v @ S[m] + c``, look up their grid cells, and accumulate the mean surface weight
+    (``out_geo[m]``) and the correlation of the centred scene features ``fs`` (K, 3) with the
+    cells' model features ``feat`` (``out_col[m]``). One pass, no temporaries."""
+    K = v.shape[0]
+    sfs0 = 0.0
+    sfs1 = 0.0
+    sfs2 = 0.0
+    fs2 = 0.0
+    for k in range(K):
+        sfs0 += fs[k, 0]
+        sfs1 += fs[k, 1]
+        sfs2 += fs[k, 2]
+        fs2 += fs[k, 0] * fs[k, 0] + fs[k, 1] * fs[k, 1] + fs[k, 2] * fs[k, 2]
+    for m in range(S.shape[0]):
+        sw = 0.0
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        sq = 0.0
+        dot = 0.0
+        for k in range(K):
+            x = v[k, 0] * S[m, 0, 0] + v[k, 1] * S[m, 1, 0] + v[k, 2] * S[m, 2, 0] + c[0]
+            y = v[k, 0] * S[m, 0, 1] + v[k, 1] * S[m, 1, 1] + v[k, 2] * S[m, 2, 1] + c[1]
+            z = v[k, 0] * S[m, 0, 2] + v[k, 1] * S[m, 1, 2] + v[k, 2] * S[m, 2, 2] + c[2]
+            i = int((x - origin[0]) * inv_cell)
+            j = int((y - origin[1]) * inv_cell)
+            l = int((z - origin[2]) * inv_cell)
+            idx = (i * ny + j) * nz + l
+            sw += weights[idx]
+            f0 = feat[idx, 0]
+            f1 = feat[idx, 1]
+            f2 = feat[idx, 2]
+            s0 += f0
+            s1 += f1
+            s2 += f2
+            sq += f0 * f0 + f1 * f1 + f2 * f2
+            dot += fs[k, 0] * f0 + fs[k, 1] * f1 + fs[k, 2] * f2
+        out_geo[m] = sw / K
+        # sum_k fs_k . (fm_k - mean fm) and sum_k |fm_k - mean fm|^2
+        num = dot - (s0 * sfs0 + s1 * sfs1 + s2 * sfs2) / K
+        var = sq - (s0 * s0 + s1 * s1 + s2 * s2) / K
+        out_col[m] = num / (math.sqrt(fs2 * max(var, 0.0)) + 1e-12)
+
+
+def warmup() -> None:
+    """Compile :func:`_score_kernel` (or load it from Numba's on-disk cache) on a tiny input, so the
+    first instance's time is not charged with it (a process start-up cost, like the imports)."""
+    g = np.zeros(8, np.float32)
+    _score_kernel(np.zeros((1, 3), np.float32), np.eye(3, dtype=np.float32)[None], np.zeros(3, np.float32),
+                  np.zeros(3, np.float32), np.float32(1.0), 2, 2, g, np.zeros((8, 3), np.float32),
+                  np.zeros((1, 3), np.float32), np.empty(1), np.empty(1))
+
+
 def _corr(fs: np.ndarray, fm: np.ndarray) -> np.ndarray:
-    """Correlation of the centred scene features (K, 3) with model features (M, K, 3) -> (M,)."""
+    """NumPy reference of the kernel's colour term (tests): correlation of the centred scene features (K, 3) with model features (M, K, 3) -> (M,)."""
     fm = fm - fm.mean(axis=1, keepdims=True)
     num = np.einsum("kc,mkc->m", fs, fm)
     den = np.sqrt((fs * fs).sum() * np.einsum("mkc,mkc->m", fm, fm)) + 1e-12
@@ -223,12 +287,19 @@ def colour_search(
 
     v_c32, v_f32, c32 = v_c.astype(np.float32), v_f.astype(np.float32), c.astype(np.float32)
 
+    inv_cell = np.float32(1.0 / grid.cell)
+    origin32 = grid.origin.astype(np.float32)
+    ny, nz = int(grid.shape[1]), int(grid.shape[2])
+    fs_smooth32, fs_sharp32 = fs_smooth.astype(np.float32), fs_sharp.astype(np.float32)
+
     def score(S, smooth: bool, sigma: float):
         """combined score = colour correlation + geo_weight x soft surface agreement."""
-        q = np.matmul(v_c32 if smooth else v_f32, S.astype(np.float32)) + c32  # (M, K, 3)
-        cells = grid.cells_of(q)
-        geo = grid.weights(sigma)[cells].mean(axis=1) * (frac_c if smooth else frac_f)
-        col = _corr(fs_smooth, grid.smooth[cells]) if smooth else _corr(fs_sharp, grid.sharp[cells])
+        S32 = np.ascontiguousarray(S, dtype=np.float32)
+        geo = np.empty(len(S32), dtype=np.float64)
+        col = np.empty(len(S32), dtype=np.float64)
+        _score_kernel(v_c32 if smooth else v_f32, S32, c32, origin32, inv_cell, ny, nz, grid.weights(sigma),
+                      grid.smooth if smooth else grid.sharp, fs_smooth32 if smooth else fs_sharp32, geo, col)
+        geo *= frac_c if smooth else frac_f
         return col + geo_weight * geo, geo, col
 
     S = random_rotations(n_rot, seed)
