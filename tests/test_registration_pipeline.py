@@ -157,3 +157,20 @@ def test_colour_kernel_matches_numpy_reference():
     cells = grid.cells_of(np.matmul(v, S) + c32)
     assert np.allclose(geo, w[cells].mean(axis=1), atol=1e-5)
     assert np.allclose(colr, _corr(fs.astype(np.float64), grid.sharp[cells].astype(np.float64)), atol=1e-4)
+
+
+def test_evaluate_images_argument_counts_images_without_estimates(tiny_dataset):
+    """GT poses as estimates for the first image only: 100 % over the images with results; with
+    ``images=`` every image, the other images' instances count as failures; an unknown image is
+    refused naming it."""
+    from sixdpose.datasets.base import DatasetError
+
+    ds = open_dataset(tiny_dataset)
+    s = ds[0]
+    ests = [Estimate(s.scene_id, s.im_id, g.obj_id, 1.0, g.R, g.t, 0.1) for g in s.instances]
+    only = evaluate(ds, ests, min_px=400)
+    assert only.accuracy == 100.0 and only.n_gt == only.n_correct
+    every = evaluate(ds, ests, min_px=400, images=ds.keys())
+    assert every.n_correct == only.n_correct and every.n_gt > only.n_gt
+    with pytest.raises(DatasetError, match="scene 999 image 0"):
+        evaluate(ds, ests, images=[(999, 0)])
