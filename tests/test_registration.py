@@ -186,6 +186,48 @@ def test_unusable_instances_get_score_zero(syn, tmp_path):
         load_predicted_masks(pred, 0, 0)
 
 
+def test_unreadable_images_and_models_are_skipped_and_recorded(syn, tmp_path, capsys):
+    """Inside a run, an image whose predictions (or files) cannot be read is logged, listed in
+    ``<out>_skipped_images.csv`` and skipped; an unreadable model fails its instances with score 0;
+    the other images are still registered and the command exits 0."""
+    import shutil
+
+    pred = tmp_path / "pred"
+    pred.mkdir()
+    ds = open_dataset(syn)
+    s0, s1 = ds[0], ds[1]
+    m = s1.instances[0].mask
+    np.savez(pred / f"{s1.scene_id}_{s1.im_id}.npz", masks=m[None], labels=np.array([s1.instances[0].obj_id]),
+             scores=np.array([0.9]))
+    (pred / f"{s0.scene_id}_{s0.im_id}.npz").write_bytes(b"not an npz")
+    out = tmp_path / "r.csv"
+    assert main(["register", "--data", str(syn), "--method", "ransac", "--masks", str(pred), "--limit", "2",
+                 "--workers", "1", "--no-progress", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "1 unreadable image(s) skipped" in printed
+    skipped = (tmp_path / "r_skipped_images.csv").read_text()
+    assert f"{s0.scene_id},{s0.im_id}," in skipped and "not an npz" not in skipped and ".npz" in skipped
+    assert len(out.read_text().strip().splitlines()) == 2  # header + image 1's estimate
+    # a corrupt model file: its instances get score 0 with the reason, the run goes on
+    bad = tmp_path / "bad"
+    shutil.copytree(syn, bad)
+    for f in (bad / "models").glob("*.ply"):
+        f.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n1 2\n")
+    fails: list = []
+    rows = run_registration(bad, "ransac", workers=1, progress=False, limit=1, failures=fails)
+    assert rows and all(r.score == 0 and "model" in r.reason for r in rows)
+    assert fails == []
+    # a corrupt depth file with GT masks (even the first image): skipped and named, the rest registered
+    bad2 = tmp_path / "bad2"
+    shutil.copytree(syn, bad2)
+    first = sorted((bad2 / "depth").iterdir())[0]
+    first.write_bytes(b"junk")
+    fails = []
+    rows = run_registration(bad2, "ransac", workers=1, progress=False, failures=fails)
+    assert len(fails) == 1 and first.name in fails[0][2]
+    assert rows and all(r.score > 0 for r in rows)
+
+
 def test_register_cli_errors(syn, tmp_path, capsys):
     assert main(["register", "--data", str(tmp_path / "none"), "--method", "fgr", "--out", str(tmp_path / "x.csv")]) == 2
     assert main(["register", "--data", str(syn), "--method", "fgr", "--masks", str(tmp_path / "nodir"), "--out", str(tmp_path / "x.csv")]) == 2

@@ -60,10 +60,24 @@ def _run(args) -> int:
             indices = range(0, len(open_dataset(args.data, split=args.split)), args.stride)
         except Exception:  # an unreadable dataset is reported by run_registration below
             indices = None
+    failures: list = []
     rows = run_registration(args.data, args.method, icp=args.icp, masks=args.masks, split=args.split, cfg=cfg,
                             workers=args.workers, limit=args.limit, min_px=args.min_px,
-                            min_score=args.min_score, progress=not args.no_progress, indices=indices)
+                            min_score=args.min_score, progress=not args.no_progress, indices=indices,
+                            failures=failures)
     write_results(rows, args.out)
     n_bad = sum(1 for r in rows if r.reason)
-    print(f"wrote {len(rows)} estimates ({n_bad} with score 0) to {args.out}")
+    msg = f"wrote {len(rows)} estimates ({n_bad} with score 0) to {args.out}"
+    if failures:
+        import csv
+        from pathlib import Path
+
+        out = Path(args.out)
+        fpath = out.with_name(out.stem + "_skipped_images.csv")
+        with open(fpath, "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["scene_id", "im_id", "reason"])
+            w.writerows(failures)
+        msg += f"; {len(failures)} unreadable image(s) skipped, listed in {fpath}"
+    print(msg)
     return 0

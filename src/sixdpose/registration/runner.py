@@ -92,8 +92,13 @@ def _init_worker(data: str, split: str, method: str, icp: bool, cfg: dict, masks
         warmup()  # compile (or load from the on-disk cache) the Numba kernel now: a start-up cost, like imports
 
 
-def process_image(index: int) -> list[ResultRow]:
-    """Register every instance of image ``index`` of the worker's dataset (see :func:`run_registration`)."""
+def process_image(index: int) -> tuple[list[ResultRow], tuple | None]:
+    """Register every instance of image ``index`` of the worker's dataset (see :func:`run_registration`).
+
+    Returns:
+        ``(rows, failure)``: the image's rows, and ``None`` or ``(scene_id, im_id, reason)`` when the
+        image itself could not be used (unreadable image files or predictions); the run goes on.
+    """
     from ..datasets.base import DatasetError
     from .geometry import backproject
     from .methods import estimate_pose
@@ -101,15 +106,24 @@ def process_image(index: int) -> list[ResultRow]:
     ds, cache, cfg = _W["ds"], _W["cache"], _W["cfg"]
     method, icp, masks, min_px = _W["method"], _W["icp"], _W["masks"], _W["min_px"]
     pred = masks != "gt"
-    sample = ds[index]  # disk reads: not timed
-    if pred:
-        dets = [d for d in load_predicted_masks(masks, sample.scene_id, sample.im_id) if d[1] >= _W.get("min_score", 0.0)]
-    else:
-        dets = [(i.obj_id, 1.0, i.mask) for i in sample.instances if i.px_visib < 0 or i.px_visib >= min_px]
-    known = ds.object_ids
-    # models are read from disk outside the timed section
+    try:
+        sample = ds[index]  # disk reads: not timed
+        if pred:
+            dets = [d for d in load_predicted_masks(masks, sample.scene_id, sample.im_id) if d[1] >= _W.get("min_score", 0.0)]
+        else:
+            dets = [(i.obj_id, 1.0, i.mask) for i in sample.instances if i.px_visib < 0 or i.px_visib >= min_px]
+    except DatasetError as e:
+        key = ds.keys()[index]
+        log.warning("scene %d image %d skipped: %s", key[0], key[1], e)
+        return [], (int(key[0]), int(key[1]), str(e))
+    known = set(ds.object_ids)
+    # models are read from disk outside the timed section; an unreadable model fails its instances only
+    bad_model: dict[int, str] = {}
     for oid in {d[0] for d in dets if d[0] in known}:
-        ds.model(oid)
+        try:
+            ds.model(oid)
+        except DatasetError as e:
+            bad_model[oid] = f"model unreadable ({e})"
     rows: list[ResultRow] = []
     for oid, det_score, mask in dets:
         t0 = time.perf_counter()
@@ -118,6 +132,8 @@ def process_image(index: int) -> list[ResultRow]:
             reason = "no depth image"
         elif oid not in known:
             reason = f"no model for obj_id {oid}"
+        elif oid in bad_model:
+            reason = bad_model[oid]
         elif mask is None:
             reason = "no mask"
         elif mask.shape != sample.depth.shape:
@@ -135,9 +151,7 @@ def process_image(index: int) -> list[ResultRow]:
             continue
         try:
             est = estimate_pose(pts, oid, method, cache, cfg, icp=icp, colors=col)
-        except DatasetError:
-            raise
-        except Exception as e:  # a numerical failure in one instance must not stop the run
+        except Exception as e:  # a numerical failure or unreadable model in one instance must not stop the run
             log.warning("scene %d image %d obj %d: registration failed (%s); score 0", sample.scene_id, sample.im_id, oid, e)
             rows.append(ResultRow(sample.scene_id, sample.im_id, oid, 0.0, np.eye(3), np.zeros(3), 0.0, f"error: {e}", time.perf_counter() - t0))
             continue
@@ -149,7 +163,7 @@ def process_image(index: int) -> list[ResultRow]:
     total = sum(r.inst_time for r in rows)
     for r in rows:
         r.time = total
-    return rows
+    return rows, None
 
 
 # ------------------------------------------------------------------------------------------
@@ -163,7 +177,17 @@ def check_inputs(ds, masks: str) -> None:
         raise UserError("the dataset split has no images")
     if getattr(ds, "has_depth", True) is False:
         raise UserError(f"{getattr(ds, 'split_dir', ds.root)}: this split has no depth images (depth/ missing); the hybrid methods need depth")
-    s = ds[0]
+    from ..datasets.base import DatasetError
+
+    s = None
+    for i in range(min(len(ds), 5)):  # one unreadable image must not stop the run (it is skipped later)
+        try:
+            s = ds[i]
+            break
+        except DatasetError as e:
+            err = e
+    if s is None:
+        raise UserError(f"the first images cannot be read: {err}")
     if s.depth is None:
         raise UserError(f"{getattr(ds, 'root', '?')}: this split has no depth images; the hybrid methods need depth")
     if masks == "gt":
@@ -186,6 +210,7 @@ def run_registration(
     min_score: float = 0.5,
     progress: bool = True,
     indices=None,
+    failures: list | None = None,
 ) -> list[ResultRow]:
     """Register every instance of every image of ``data`` (a synthetic or BOP dataset).
 
@@ -198,6 +223,8 @@ def run_registration(
         limit: only the first ``limit`` images. min_px: with GT masks, skip instances with fewer
             visible pixels (0: register all). min_score: with predicted masks, skip detections scoring
             below this. progress: tqdm bar. indices: explicit image indices.
+        failures: if a list, receives ``(scene_id, im_id, reason)`` for every image that could not be
+            read (corrupt RGB/depth/mask files or predictions); such images are logged and skipped.
     Returns:
         one :class:`ResultRow` per instance (per prediction with predicted masks), in image order.
     """
@@ -220,12 +247,16 @@ def run_registration(
     cfgd = {k: v for k, v in asdict(cfg).items()}
     args = (str(data), split, method, icp, cfgd, str(masks), int(min_px), float(min_score))
     rows: list[ResultRow] = []
+    bad_images: list[tuple] = []
     bar = tqdm(total=len(idx), desc=f"register {method}{'+icp' if icp else ''}", unit="img", disable=not progress)
     if workers <= 1 or len(idx) <= 1:
         _init_worker(*args)
         _W["ds"] = ds
         for i in idx:
-            rows.extend(process_image(i))
+            r, fail = process_image(i)
+            rows.extend(r)
+            if fail:
+                bad_images.append(fail)
             bar.update()
     else:
         import multiprocessing as mp
@@ -236,8 +267,10 @@ def run_registration(
             os.environ[k] = "1"
         try:
             with mp.get_context("spawn").Pool(workers, initializer=_init_worker, initargs=args) as pool:
-                for r in pool.imap(process_image, idx, chunksize=1):
+                for r, fail in pool.imap(process_image, idx, chunksize=1):
                     rows.extend(r)
+                    if fail:
+                        bad_images.append(fail)
                     bar.update()
         finally:
             for k, v in saved.items():
@@ -249,6 +282,10 @@ def run_registration(
     n_fail = sum(1 for r in rows if r.reason)
     if n_fail:
         log.warning("%d of %d instances had unusable input or failed (score 0)", n_fail, len(rows))
+    if bad_images:
+        log.warning("%d of %d images could not be read and were skipped", len(bad_images), len(idx))
+    if failures is not None:
+        failures.extend(bad_images)
     return rows
 
 
