@@ -50,7 +50,7 @@ reproduce: setup
 	@for nb in notebooks/[0-9]*.ipynb; do \
 	  $(PAPERMILL) $$nb notebooks/executed/$$(basename $$nb) -p PROFILE paper -p WORKERS $(WORKERS) || exit 1; done
 
-BENCHMARKS := generation segmentation registration
+BENCHMARKS := generation segmentation registration colour_robustness
 
 benchmark: setup
 	@for b in $(BENCHMARKS); do echo "== benchmarks/$$b.py"; $(PY) benchmarks/$$b.py || exit 1; done
