@@ -52,7 +52,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     import sixdpose.datasets.base as base
-    from sixdpose.evaluation.evaluate import Estimate, evaluate
+    from sixdpose.evaluation.evaluate import evaluate
     from sixdpose.registration.presets import get_preset
     from sixdpose.registration.runner import run_registration
 
@@ -72,7 +72,7 @@ def main(argv=None) -> int:
                                     workers=1, min_px=400, progress=False, indices=idx)
         finally:
             base.open_dataset = plain_open
-        res = evaluate(ds, [Estimate(r.scene_id, r.im_id, r.obj_id, r.score, r.R, r.t, r.time) for r in rows], min_px=400)
+        res = evaluate(ds, rows, min_px=400)
         print(f"{args.method}+icp  {label:16s} ADD(-S) {res.accuracy:6.2f}% ({res.n_correct}/{res.n_gt})", flush=True)
     return 0
 

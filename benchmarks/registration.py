@@ -43,7 +43,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from sixdpose.datasets.base import open_dataset
-    from sixdpose.evaluation.evaluate import Estimate, evaluate
+    from sixdpose.evaluation.evaluate import evaluate
     from sixdpose.registration.presets import get_preset
     from sixdpose.registration.runner import run_registration
 
@@ -66,8 +66,7 @@ def main(argv=None) -> int:
                 rows = run_registration(data, method, icp=icp, split=args.split, cfg=cfg, workers=1, limit=args.limit,
                                         min_px=args.min_px, progress=False, indices=indices)
                 wall = time.perf_counter() - t0
-                ests = [Estimate(r.scene_id, r.im_id, r.obj_id, r.score, r.R, r.t, r.time) for r in rows]
-                res = evaluate(ds, ests, min_px=args.min_px)
+                res = evaluate(ds, rows, min_px=args.min_px)
                 inst_time = sum(r.inst_time for r in rows)
                 table.append((preset, method + ("+icp" if icp else ""), res.accuracy, res.n_gt, len(rows) / inst_time if inst_time else float("nan"), res.fps, wall))
                 print(f"{preset:8s} {table[-1][1]:15s} ADD(-S) {res.accuracy:6.2f}%  ({res.n_correct}/{res.n_gt})  "

@@ -41,7 +41,7 @@ def _parse_variant(text: str) -> tuple[str, dict]:
 def _run(job):
     data, split, method, icp, preset, name, kw, stride, min_px = job
     from sixdpose.datasets.base import open_dataset
-    from sixdpose.evaluation.evaluate import Estimate, evaluate
+    from sixdpose.evaluation.evaluate import evaluate
     from sixdpose.registration.presets import get_preset
     from sixdpose.registration.runner import run_registration
 
@@ -49,8 +49,7 @@ def _run(job):
     ds = open_dataset(data, split=split)
     rows = run_registration(data, method, icp=icp, split=split, cfg=cfg, workers=1, min_px=min_px, progress=False,
                             indices=range(0, len(ds), stride))
-    ests = [Estimate(r.scene_id, r.im_id, r.obj_id, r.score, r.R, r.t, r.time) for r in rows]
-    res = evaluate(ds, ests, min_px=min_px)
+    res = evaluate(ds, rows, min_px=min_px)
     inst_time = sum(r.inst_time for r in rows)
     per = {oid: (v["n_correct"], v["n_gt"]) for oid, v in res.per_object.items()}
     return name, res.accuracy, res.n_correct, res.n_gt, len(rows) / inst_time if inst_time else float("nan"), per

@@ -102,7 +102,9 @@ def evaluate(dataset, estimates: list[Estimate], min_px: int = 400, threshold: f
 
     Args:
         dataset: a reader (:func:`~sixdpose.datasets.base.open_dataset`).
-        estimates: rows of :func:`load_results`. min_px: GT visibility threshold (pixels).
+        estimates: rows of :func:`load_results`, or any objects with the same attributes
+            (``scene_id, im_id, obj_id, score, R, t, time``), such as the registration stage's result
+            rows. min_px: GT visibility threshold (pixels).
         threshold: fraction of the diameter (0.1).
         images: the ``(scene_id, im_id)`` keys evaluated; an image without estimates counts its GT
             instances as failures. ``None``: the images that appear in the results (every image if
