@@ -9,7 +9,7 @@ Usage::
 
 Without ``--data`` the fixed validation split is generated (if missing) with the generator's ``val``
 profile (seed 100, 6 scenes x 20 views) into ``data/val``; the default ``--stride 5`` takes every 5th
-image of it. The ``paper`` preset (full clouds, Super4PCS up to 30 s per instance) runs on every
+image of it. The ``paper`` preset (full clouds, 2 mm models; several times slower) runs on every
 ``--paper-stride``-th image (default: 4 x ``--stride``), a subset of the same images; each row prints
 its instance count. A BOP root works too.
 """
@@ -35,7 +35,7 @@ def main(argv=None) -> int:
     ap.add_argument("--limit", type=int, default=None, help="only the first N images")
     ap.add_argument("--stride", type=int, default=5, help="only every N-th image (a fixed subset over all scenes)")
     ap.add_argument("--paper-stride", type=int, default=None,
-                    help="image stride of the paper preset (default 4 x --stride: it is ~20x slower)")
+                    help="image stride of the paper preset (default 4 x --stride: it is several times slower)")
     ap.add_argument("--methods", default="ransac,fgr,super4pcs")
     ap.add_argument("--presets", default="default,paper")
     ap.add_argument("--min-px", type=int, default=400)
