@@ -375,7 +375,8 @@ def super4pcs(
         # first and thin both sides at random so that at most ``join_budget`` pairs are materialised
         # (a random subset, as the max_candidates cap below takes anyway); without this one base of
         # the baseball with the paper's delta took 28 s and 6 GB
-        n_join = int(t1.count_neighbors(t2, tol))
+        # (the join cannot exceed len(e1) * len(e2): only count when that could pass the budget)
+        n_join = int(t1.count_neighbors(t2, tol)) if len(e1) * len(e2) > join_budget else 0
         if n_join > join_budget:
             keep_f = math.sqrt(join_budget / n_join)
             m1 = rng.random(len(e1)) < keep_f
