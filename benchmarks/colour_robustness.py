@@ -23,24 +23,38 @@ import numpy as np  # noqa: E402
 
 
 class PerturbedColours:
-    """A dataset reader whose samples' RGB is perturbed, reproducibly per image index."""
+    """A :class:`~sixdpose.datasets.base.DatasetReader` whose samples' RGB is perturbed, reproducibly
+    per image (random per-channel gain, gamma and noise); everything else is the wrapped reader's."""
 
     def __init__(self, ds):
         self._ds = ds
-
-    def __getattr__(self, k):
-        return getattr(self._ds, k)
+        self._index = {k: i for i, k in enumerate(ds.keys())}
+        self.location, self.has_depth, self.has_masks = ds.location, ds.has_depth, ds.has_masks
 
     def __len__(self):
         return len(self._ds)
 
     def __getitem__(self, i):
-        s = self._ds[i]
-        rng = np.random.default_rng(1000 + i)
-        x = s.rgb.astype(np.float64) / 255.0
-        x = np.clip(x * rng.uniform(0.75, 1.25, 3), 0, 1) ** rng.uniform(0.8, 1.25)
-        x = np.clip(x + rng.normal(0, 6 / 255, x.shape), 0, 1)
-        s.rgb = (x * 255).astype(np.uint8)
+        return self.load(self._ds.keys()[i])
+
+    def keys(self):
+        return self._ds.keys()
+
+    @property
+    def object_ids(self):
+        return self._ds.object_ids
+
+    def model(self, obj_id):
+        return self._ds.model(obj_id)
+
+    def load(self, key, *, masks=True, rgb=True, depth=True):
+        s = self._ds.load(key, masks=masks, rgb=rgb, depth=depth)
+        if s.rgb is not None:
+            rng = np.random.default_rng(1000 + self._index[tuple(key)])
+            x = s.rgb.astype(np.float64) / 255.0
+            x = np.clip(x * rng.uniform(0.75, 1.25, 3), 0, 1) ** rng.uniform(0.8, 1.25)
+            x = np.clip(x + rng.normal(0, 6 / 255, x.shape), 0, 1)
+            s.rgb = (x * 255).astype(np.uint8)
         return s
 
 
@@ -51,7 +65,7 @@ def main(argv=None) -> int:
     ap.add_argument("--method", default="ransac", choices=["ransac", "fgr", "super4pcs"])
     args = ap.parse_args(argv)
 
-    import sixdpose.datasets.base as base
+    from sixdpose.datasets import DatasetReader, open_dataset
     from sixdpose.evaluation.evaluate import evaluate
     from sixdpose.registration.presets import get_preset
     from sixdpose.registration.runner import run_registration
@@ -61,17 +75,13 @@ def main(argv=None) -> int:
         from sixdpose.generation import ensure_dataset
 
         data = ensure_dataset(Path(__file__).resolve().parents[1] / "data" / "val", profile="val")
-    plain_open = base.open_dataset
-    ds = plain_open(data)
+    ds = open_dataset(data)
+    perturbed = PerturbedColours(ds)
+    assert isinstance(perturbed, DatasetReader)
     idx = range(0, len(ds), args.stride)
-    for label, perturb, colour in (("rendered RGB", False, True), ("perturbed RGB", True, True), ("no colour step", False, False)):
-        # the runner opens the dataset itself (single process): hand it the perturbing reader
-        base.open_dataset = (lambda *a, **k: PerturbedColours(plain_open(*a, **k))) if perturb else plain_open
-        try:
-            rows = run_registration(data, args.method, icp=True, cfg=get_preset("default", colour_verify=colour),
-                                    workers=1, min_px=400, progress=False, indices=idx)
-        finally:
-            base.open_dataset = plain_open
+    for label, reader, colour in (("rendered RGB", ds, True), ("perturbed RGB", perturbed, True), ("no colour step", ds, False)):
+        rows = run_registration(reader, args.method, icp=True, cfg=get_preset("default", colour_verify=colour),
+                                workers=1, min_px=400, progress=False, indices=idx)
         res = evaluate(ds, rows, min_px=400)
         print(f"{args.method}+icp  {label:16s} ADD(-S) {res.accuracy:6.2f}% ({res.n_correct}/{res.n_gt})", flush=True)
     return 0

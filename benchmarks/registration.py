@@ -63,12 +63,11 @@ def main(argv=None) -> int:
         for method in args.methods.split(","):
             for icp in (False, True):
                 t0 = time.perf_counter()
-                rows = run_registration(data, method, icp=icp, split=args.split, cfg=cfg, workers=1, limit=args.limit,
+                rows = run_registration(ds, method, icp=icp, cfg=cfg, workers=1, limit=args.limit,
                                         min_px=args.min_px, progress=False, indices=indices)
                 wall = time.perf_counter() - t0
                 res = evaluate(ds, rows, min_px=args.min_px)
-                inst_time = sum(r.inst_time for r in rows)
-                table.append((preset, method + ("+icp" if icp else ""), res.accuracy, res.n_gt, len(rows) / inst_time if inst_time else float("nan"), res.fps, wall))
+                table.append((preset, method + ("+icp" if icp else ""), res.accuracy, res.n_gt, res.instances_per_s, res.fps, wall))
                 print(f"{preset:8s} {table[-1][1]:15s} ADD(-S) {res.accuracy:6.2f}%  ({res.n_correct}/{res.n_gt})  "
                       f"{table[-1][4]:7.2f} inst/s  {res.fps:6.2f} FPS  (wall {wall:.1f}s)", flush=True)
     print("\nmethod            " + "  ".join(f"{p:>31s}" for p in args.presets.split(",")))
@@ -80,12 +79,10 @@ def main(argv=None) -> int:
             cells.append(f"{t[2]:6.2f}% (N={t[3]}) {t[4]:6.2f} inst/s")
         print(f"{n:16s}  " + "  ".join(f"{c:>31s}" for c in cells))
     if args.csv:
-        import csv
+        from sixdpose.artifacts.tables import write_table
 
-        with open(args.csv, "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["preset", "method", "add_s_accuracy", "n_gt", "instances_per_s_one_core", "fps", "wall_s"])
-            w.writerows(table)
+        cols = ["preset", "method", "add_s_accuracy", "n_gt", "instances_per_s_one_core", "fps", "wall_s"]
+        write_table([dict(zip(cols, t)) for t in table], cols, args.csv)
     return 0
 
 

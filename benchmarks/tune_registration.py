@@ -27,15 +27,10 @@ from pathlib import Path  # noqa: E402
 
 
 def _parse_variant(text: str) -> tuple[str, dict]:
+    from sixdpose.config import parse_overrides
+
     name, _, rest = text.partition(":")
-    kw = {}
-    for item in filter(None, rest.split(",")):
-        k, _, v = item.partition("=")
-        try:
-            kw[k.strip()] = ast.literal_eval(v.strip())
-        except (ValueError, SyntaxError):
-            kw[k.strip()] = v.strip()
-    return name, kw
+    return name, parse_overrides(filter(None, rest.split(",")))
 
 
 def _run(job):
@@ -47,12 +42,11 @@ def _run(job):
 
     cfg = get_preset(preset, **kw)
     ds = open_dataset(data, split=split)
-    rows = run_registration(data, method, icp=icp, split=split, cfg=cfg, workers=1, min_px=min_px, progress=False,
+    rows = run_registration(ds, method, icp=icp, cfg=cfg, workers=1, min_px=min_px, progress=False,
                             indices=range(0, len(ds), stride))
     res = evaluate(ds, rows, min_px=min_px)
-    inst_time = sum(r.inst_time for r in rows)
     per = {oid: (v["n_correct"], v["n_gt"]) for oid, v in res.per_object.items()}
-    return name, res.accuracy, res.n_correct, res.n_gt, len(rows) / inst_time if inst_time else float("nan"), per
+    return name, res.accuracy, res.n_correct, res.n_gt, res.instances_per_s, per
 
 
 def main(argv=None) -> int:
@@ -84,12 +78,10 @@ def main(argv=None) -> int:
                   + " ".join(f"{o}:{c}/{n}" for o, (c, n) in worst), flush=True)
             out.append((label, name, dict(dict(variants)[name]), acc, nc, ng, ips))
     if args.csv:
-        import csv
+        from sixdpose.artifacts.tables import write_table
 
-        with open(args.csv, "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["method", "variant", "overrides", "add_s_accuracy", "n_correct", "n_gt", "instances_per_s"])
-            w.writerows(out)
+        cols = ["method", "variant", "overrides", "add_s_accuracy", "n_correct", "n_gt", "instances_per_s"]
+        write_table([dict(zip(cols, o)) for o in out], cols, args.csv)
     return 0
 
 

@@ -85,7 +85,7 @@ def test_export_bop_round_trip(tmp_path):
     info = json.loads((tmp_path / "bop" / "models" / "models_info.json").read_text())
     assert set(info) == {"15"} and info["15"]["diameter"] == pytest.approx(a.model(15).diameter * 1000)
     for i, key in enumerate(a.keys()):
-        sa, sb = a[i], b.load_key(*key)
+        sa, sb = a[i], b.load(key)
         assert (sa.scene_id, sa.im_id) == (sb.scene_id, sb.im_id)
         np.testing.assert_array_equal(sa.rgb, sb.rgb)
         np.testing.assert_allclose(sb.depth, sa.depth, atol=1e-4)  # 0.1 mm depth unit
@@ -102,3 +102,10 @@ def test_export_bop_round_trip(tmp_path):
     assert mb.diameter == pytest.approx(ma.diameter) and mb.symmetric == ma.symmetric
     # a second export into the same directory is refused
     assert main(["export-bop", "--data", str(src), "--out", str(tmp_path / "bop")]) == 2
+    # a foreign non-empty directory is refused and left as it was (it used to be overwritten)
+    foreign = tmp_path / "foreign"
+    (foreign / "models").mkdir(parents=True)
+    (foreign / "models" / "obj_000001.ply").write_text("mine")
+    assert main(["export-bop", "--data", str(src), "--out", str(foreign)]) == 2
+    assert (foreign / "models" / "obj_000001.ply").read_text() == "mine"
+    assert sorted(p.name for p in foreign.rglob("*")) == ["models", "obj_000001.ply"]

@@ -47,8 +47,8 @@ def test_adds_invariant_to_symmetry():
     t = np.array([0, 0, 0.5])
     assert metrics.adds(Rz, t, np.eye(3), t, pts) == pytest.approx(0.0, abs=1e-12)
     assert metrics.add(Rz, t, np.eye(3), t, pts) > 0.05
-    assert metrics.add_s(Rz, t, np.eye(3), t, pts, symmetric=True) == pytest.approx(0.0, abs=1e-12)
-    assert metrics.add_s(Rz, t, np.eye(3), t, pts, symmetric=False) == metrics.add(Rz, t, np.eye(3), t, pts)
+    assert metrics.add_or_adds(Rz, t, np.eye(3), t, pts, symmetric=True) == pytest.approx(0.0, abs=1e-12)
+    assert metrics.add_or_adds(Rz, t, np.eye(3), t, pts, symmetric=False) == metrics.add(Rz, t, np.eye(3), t, pts)
 
 
 def test_add_pure_translation_equals_offset():

@@ -111,24 +111,12 @@ def look_pose(seed: int, t=(0.0, 0.0, 0.55)):
 def write_synthetic_dataset(root: Path, n_images: int = 3, two_instances_in_first: bool = True, seed: int = 0) -> Path:
     """Write a tiny dataset in the synthetic layout: one asymmetric object (``035_power_drill``,
     obj_id 15), 2 scenes, ``n_images`` images of 160x120, the first with two instances."""
-    import yaml
-    from PIL import Image
+    from sixdpose.datasets.layout import write_dataset
 
-    from sixdpose.datasets.bop import _write_ply
-
-    root = Path(root)
     name, oid = "035_power_drill", 15
-    (root / "models").mkdir(parents=True, exist_ok=True)
-    (root / "RGB").mkdir(exist_ok=True)
-    (root / "depth").mkdir(exist_ok=True)
-    (root / "masks" / name).mkdir(parents=True, exist_ok=True)
     P, N, C, diam = make_shape(0.002, seed)
-    _write_ply(root / "models" / f"{name}.ply", P, N, C)
-    (root / "models" / "models_info.yml").write_text(
-        yaml.safe_dump({name: {"obj_id": oid, "diameter": diam, "symmetric": False}})
-    )
     Pd, Nd, _, _ = make_shape(0.0012, seed + 1)  # denser samples for rendering
-    gt = {}
+    images = []
     for im in range(n_images):
         poses = [look_pose(seed * 100 + im, (0.0, 0.0, 0.55))]
         if im == 0 and two_instances_in_first:
@@ -136,13 +124,8 @@ def write_synthetic_dataset(root: Path, n_images: int = 3, two_instances_in_firs
         depth, label = render_depth([(Pd, Nd, R, t) for R, t in poses])
         rgb = np.zeros((H_SMALL, W_SMALL, 3), np.uint8)
         rgb[label >= 0] = (200, 120, 40)
-        Image.fromarray(rgb).save(root / "RGB" / f"{im}.png")
-        np.save(root / "depth" / f"{im}.npy", depth)
-        objs = []
-        for k, (R, t) in enumerate(poses):
-            m = label == k
-            Image.fromarray(m.astype(np.uint8) * 255).save(root / "masks" / name / f"{im}_{k}.png")
-            objs.append({"obj_name": name, "obj_id": oid, "inst": k, "R": R.tolist(), "t": t.tolist(), "px_visib": int(m.sum())})
-        gt[im] = {"scene_id": im % 2, "cam_K": K_SMALL.reshape(-1).tolist(), "objects": objs}
-    (root / "gt.yml").write_text(yaml.safe_dump(gt))
+        insts = [{"obj_name": name, "obj_id": oid, "inst": k, "R": R, "t": t, "mask": label == k} for k, (R, t) in enumerate(poses)]
+        images.append({"im_id": im, "scene_id": im % 2, "K": K_SMALL, "rgb": rgb, "depth": depth, "instances": insts})
+    models = {name: {"obj_id": oid, "diameter": diam, "symmetric": False, "points": P, "normals": N, "colors": C}}
+    root = write_dataset(root, images, models, {"generator": "tests.test_reg_helpers"})
     return root

@@ -7,12 +7,14 @@ import pytest
 
 from sixdpose.cli import main
 from sixdpose.datasets.base import DatasetError, open_dataset
-from sixdpose.evaluation.evaluate import Estimate, evaluate, load_results
+from sixdpose.artifacts.poses import PoseEstimate as Estimate, read_results
+from sixdpose.artifacts.predictions import PredictionError, read_predictions
+from sixdpose.evaluation.evaluate import EvaluationError, evaluate
 from sixdpose.registration import geometry
 from sixdpose.registration.geometry import ReferenceCache, backproject
 from sixdpose.registration.methods import estimate_pose
 from sixdpose.registration.presets import PRESETS, get_preset
-from sixdpose.registration.runner import load_predicted_masks, run_registration
+from sixdpose.registration.runner import run_registration
 from test_reg_helpers import YCBV, write_synthetic_dataset
 
 needs_ycbv = pytest.mark.skipif(not YCBV.is_dir(), reason="shared/data/ycbv_sample not available")
@@ -105,21 +107,33 @@ def test_methods_on_rendered_views(syn, views, method, icp, tol):
     errs = []
     for pts, R, t in views:
         est = estimate_pose(pts, 15, method, cache, cfg, icp=icp)
-        assert est.T.shape == (4, 4) and est.time > 0 and 0 <= est.score <= 1
-        np.testing.assert_allclose(est.T[:3, :3] @ est.T[:3, :3].T, np.eye(3), atol=1e-6)
-        assert np.linalg.det(est.T[:3, :3]) == pytest.approx(1.0)
-        errs.append(add(est.T[:3, :3], est.T[:3, 3], R, t, m.points))
+        assert est.X_CO.shape == (4, 4) and est.time > 0 and 0 <= est.score <= 1
+        np.testing.assert_allclose(est.X_CO[:3, :3] @ est.X_CO[:3, :3].T, np.eye(3), atol=1e-6)
+        assert np.linalg.det(est.X_CO[:3, :3]) == pytest.approx(1.0)
+        errs.append(add(est.X_CO[:3, :3], est.X_CO[:3, 3], R, t, m.points))
     assert sum(e < tol * m.diameter for e in errs) >= 2, errs
 
 
-def test_presets():
-    assert PRESETS["paper"].s4pcs_overlap == 0.7 and PRESETS["paper"].s4pcs_delta == 0.01
-    assert PRESETS["paper"].s4pcs_samples == 200 and PRESETS["paper"].model_voxel == 0.002
-    assert PRESETS["paper"].scene_voxel_rel is None
-    with pytest.raises(ValueError, match="bogus"):
+def test_presets_behaviour(syn):
+    """Presets are validated configs; the paper preset keeps the full masked cloud (section IV-B)
+    while the default one downsamples it; an override changes exactly that field."""
+    from sixdpose.errors import ConfigError
+    from sixdpose.registration.methods import prepare_scene
+    from sixdpose.registration.geometry import backproject
+
+    with pytest.raises(ConfigError, match="bogus"):
         get_preset("default", bogus=1)
-    with pytest.raises(ValueError, match="unknown preset"):
+    with pytest.raises(ConfigError, match="unknown profile"):
         get_preset("nope")
+    with pytest.raises(ConfigError, match="icp_kind"):
+        get_preset("default", icp_kind="sideways")
+    assert get_preset("default", cv_rotations=512).cv_rotations == 512
+    s = open_dataset(syn)[1]
+    pts = backproject(s.depth, s.K, s.instances[0].mask)[0]
+    d = open_dataset(syn).model(15).diameter
+    full = prepare_scene(pts, d, PRESETS["paper"], features=False)
+    down = prepare_scene(pts, d, PRESETS["default"], features=False)
+    assert len(full.points) == len(pts) > len(down.points)
 
 
 def test_runner_writes_bop_rows_and_evaluates(syn, tmp_path):
@@ -132,7 +146,7 @@ def test_runner_writes_bop_rows_and_evaluates(syn, tmp_path):
     assert len(rows[0]["R"].split()) == 9 and len(rows[0]["t"].split()) == 3
     assert 400 < float(rows[2]["t"].split()[2]) < 700  # millimetres
     assert rows[0]["time"] == rows[1]["time"]  # BOP: time of the whole image on each of its rows
-    ests = load_results(out)
+    ests = read_results(out)
     res = evaluate(open_dataset(syn), ests, min_px=50)
     assert res.n_gt == 4 and res.accuracy == 100.0
     assert res.fps > 0 and res.instances_per_s == pytest.approx(4 * res.fps / 3)
@@ -161,7 +175,7 @@ def test_evaluate_matching_and_min_px(syn):
     # min_px drops the small instance
     r = evaluate(ds, good, min_px=max(g0.px_visib, g1.px_visib))
     assert r.n_gt == 1
-    with pytest.raises(DatasetError, match="not in the dataset"):
+    with pytest.raises(EvaluationError, match="not in"):
         evaluate(ds, [Estimate(9, 99, 15, 1.0, np.eye(3), np.zeros(3), 0.1)])
 
 
@@ -173,17 +187,17 @@ def test_unusable_instances_get_score_zero(syn, tmp_path):
     empty = np.zeros_like(m)
     np.savez(pred / f"{s.scene_id}_{s.im_id}.npz", masks=np.stack([m, empty, m]), labels=np.array([15, 15, 99]),
              scores=np.array([0.9, 0.8, 0.7]))
-    dets = load_predicted_masks(pred, s.scene_id, s.im_id)
-    assert [(d[0], d[1]) for d in dets] == [(15, pytest.approx(0.9)), (15, pytest.approx(0.8)), (99, pytest.approx(0.7))]
-    assert load_predicted_masks(pred, 0, 0) == []  # no file: no detections
+    dets = read_predictions(pred, s.scene_id, s.im_id)
+    assert [(d.obj_id, d.score) for d in dets] == [(15, pytest.approx(0.9)), (15, pytest.approx(0.8)), (99, pytest.approx(0.7))]
+    assert read_predictions(pred, 0, 0) == []  # no file: no detections
     rows = run_registration(syn, "super4pcs", masks=str(pred), workers=1, progress=False, indices=[1])
     assert len(rows) == 3
     assert rows[0].score > 0 and rows[0].reason == ""
     assert rows[1].score == 0 and "valid depth points" in rows[1].reason
     assert rows[2].score == 0 and "no model" in rows[2].reason
     (pred / "0_0.npz").write_bytes(b"junk")
-    with pytest.raises(DatasetError, match="0_0.npz"):
-        load_predicted_masks(pred, 0, 0)
+    with pytest.raises(PredictionError, match="0_0.npz"):
+        read_predictions(pred, 0, 0)
 
 
 def test_unreadable_images_and_models_are_skipped_and_recorded(syn, tmp_path, capsys):
@@ -261,6 +275,6 @@ def test_real_depth_ycbv_every_method(tmp_path):
                 pts, _, _ = backproject(s.depth, s.K, inst.mask)
                 est = estimate_pose(pts, inst.obj_id, method, cache, cfg, icp=True)
                 m = ds.model(inst.obj_id)
-                ok += adds(est.T[:3, :3], est.T[:3, 3], inst.R, inst.t, m.points) < 0.1 * m.diameter
+                ok += adds(est.X_CO[:3, :3], est.X_CO[:3, 3], inst.R, inst.t, m.points) < 0.1 * m.diameter
                 n += 1
         assert ok >= n - 2, (method, ok, n)

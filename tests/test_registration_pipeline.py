@@ -9,7 +9,8 @@ import pytest
 
 from sixdpose.cli import main
 from sixdpose.datasets.base import open_dataset
-from sixdpose.evaluation.evaluate import Estimate, evaluate
+from sixdpose.artifacts.poses import PoseEstimate as Estimate
+from sixdpose.evaluation.evaluate import evaluate
 from sixdpose.registration.runner import run_registration
 
 
@@ -62,7 +63,7 @@ def test_predicted_masks_and_min_score(tiny_dataset, tmp_path):
     assert len(rows_all) == n_kept + sum(1 for i in idx if any(g.px_visib >= 400 for g in ds[i].instances))
     # the estimates from the predicted masks are scored like any results (FGR's tuple sampling is not
     # seeded by Open3D, so the count is not compared exactly with a GT-mask run)
-    ests = rows  # result rows carry the Estimate fields: evaluate takes them as they are
+    ests = rows  # the runner returns PoseEstimate rows: evaluate takes them as they are
     a = evaluate(ds, ests, min_px=400)
     assert a.n_gt == n_kept
     assert a.n_correct >= 0.5 * n_kept, a.summary()
@@ -86,7 +87,7 @@ def test_colour_search_recovers_a_rotated_pose(tiny_dataset, colour):
     textured object; without colours (flat) it keeps the input pose unless geometry is better."""
     from scipy.spatial.transform import Rotation
 
-    from sixdpose.evaluation.metrics import add_s
+    from sixdpose.evaluation.metrics import add_or_adds
     from sixdpose.registration.geometry import backproject
     from sixdpose.registration.verify import build_grid, colour_search
 
@@ -114,10 +115,10 @@ def test_colour_search_recovers_a_rotated_pose(tiny_dataset, colour):
     if colour:
         res = colour_search(T @ A, pts, col, grid, m.diameter)
         assert res.changed
-        assert add_s(res.T[:3, :3], res.T[:3, 3], g.R, g.t, m.points, m.symmetric) < 0.1 * m.diameter
+        assert add_or_adds(res.X_CO[:3, :3], res.X_CO[:3, 3], g.R, g.t, m.points, m.symmetric) < 0.1 * m.diameter
     else:
         res = colour_search(T, pts, np.full_like(col, 0.5), grid, m.diameter)
-        assert not res.changed and np.allclose(res.T, T)  # a correct pose is kept
+        assert not res.changed and np.allclose(res.X_CO, T)  # a correct pose is kept
 
 
 def test_colour_kernel_matches_numpy_reference():
@@ -163,7 +164,7 @@ def test_evaluate_images_argument_counts_images_without_estimates(tiny_dataset):
     """GT poses as estimates for the first image only: 100 % over the images with results; with
     ``images=`` every image, the other images' instances count as failures; an unknown image is
     refused naming it."""
-    from sixdpose.datasets.base import DatasetError
+    from sixdpose.evaluation.evaluate import EvaluationError
 
     ds = open_dataset(tiny_dataset)
     s = ds[0]
@@ -172,5 +173,5 @@ def test_evaluate_images_argument_counts_images_without_estimates(tiny_dataset):
     assert only.accuracy == 100.0 and only.n_gt == only.n_correct
     every = evaluate(ds, ests, min_px=400, images=ds.keys())
     assert every.n_correct == only.n_correct and every.n_gt > only.n_gt
-    with pytest.raises(DatasetError, match="scene 999 image 0"):
+    with pytest.raises(EvaluationError, match="scene 999 image 0"):
         evaluate(ds, ests, images=[(999, 0)])

@@ -10,6 +10,16 @@ from sixdpose.registration.geometry import estimate_normals, to_o3d
 from test_reg_helpers import make_shape
 
 
+
+def _cfg(**kw):
+    """Unbounded search settings (no time limit, large candidate caps, stop at LCP 0.98)."""
+    from sixdpose.registration.presets import RegistrationConfig
+
+    base = dict(s4pcs_samples=200, s4pcs_stop_lcp=0.98, s4pcs_max_candidates=200000, s4pcs_max_pairs=50000,
+                s4pcs_max_time=None, s4pcs_delta_rel=None)
+    base.update(kw)
+    return RegistrationConfig(**base)
+
 def _partial(P, N, R, t, noise, rng):
     pc, nc = P @ R.T + t, N @ R.T
     keep = np.einsum("ij,ij->i", nc, -pc) > 0.1 * np.linalg.norm(pc, axis=1)
@@ -69,7 +79,7 @@ def test_super4pcs_partial_view_known_pose(seed, outliers):
     estimate_normals(pcd)
     Qp = to_o3d(Pm, Nm).voxel_down_sample(0.006)
     res = S.super4pcs(np.asarray(pcd.points), np.asarray(pcd.normals), np.asarray(Qp.points), np.asarray(Qp.normals),
-                      overlap=0.5 if outliers else 0.7, delta=0.006, n_samples=200, seed=seed, Q_verify=Pm, Qn_verify=Nm)
+                      _cfg(s4pcs_overlap=0.5 if outliers else 0.7, seed=seed), delta=0.006, Q_verify=Pm, Qn_verify=Nm)
     T = np.linalg.inv(res.T)  # scene -> model inverted: X_CO
     err = add(T[:3, :3], T[:3, 3], R, t, Pm)
     assert err < 0.1 * diam, (err, res)
@@ -86,6 +96,6 @@ def test_super4pcs_is_deterministic():
     Pm, Nm, _, _ = make_shape(0.006)
     R = Rotation.random(random_state=4).as_matrix()
     P = Pm @ R.T
-    a = S.super4pcs(P, Nm @ R.T, Pm, Nm, seed=7, delta=0.006)
-    b = S.super4pcs(P, Nm @ R.T, Pm, Nm, seed=7, delta=0.006)
+    a = S.super4pcs(P, Nm @ R.T, Pm, Nm, _cfg(seed=7), delta=0.006)
+    b = S.super4pcs(P, Nm @ R.T, Pm, Nm, _cfg(seed=7), delta=0.006)
     np.testing.assert_array_equal(a.T, b.T)

@@ -1,7 +1,8 @@
 """The ``sixdpose`` console script. Each stage adds its subcommands through a ``register`` function.
 
-Errors a user can fix (bad arguments, missing files) are reported as one line on stderr with exit
-status 2; nothing is written in that case.
+Errors a user can fix (bad arguments, missing or corrupt files, an output directory that is not ours)
+are the package's :class:`~sixdpose.errors.SixdposeError` subclasses, raised by each stage; this module
+alone turns them into one line on stderr and exit status 2. Nothing is written in that case.
 """
 
 from __future__ import annotations
@@ -9,6 +10,8 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+
+from .errors import SixdposeError
 
 #: Modules that contribute subcommands, each with ``register(subparsers) -> None``; every parser it
 #: adds sets ``func`` (called with the parsed namespace, returns an exit status or None).
@@ -22,8 +25,8 @@ COMMAND_MODULES = (
 )
 
 
-class UserError(Exception):
-    """An error caused by the user's input; printed as one line, exit status 2."""
+class UserError(SixdposeError):
+    """A bad command-line argument found by a subcommand's own checks (one line, exit status 2)."""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -40,14 +43,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="sixdpose", description="6D pose estimation from RGB-D (paper companion)")
     parser.add_argument("--version", action="version", version=f"sixdpose {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for name in COMMAND_MODULES:
-        try:
-            mod = importlib.import_module(name)
-        except ModuleNotFoundError as e:
-            if e.name and (name == e.name or name.startswith(e.name + ".")):  # stage not in this build
-                continue
-            raise
-        mod.register(sub)
+    for name in COMMAND_MODULES:  # a stage that fails to import is an error, never a missing subcommand
+        importlib.import_module(name).register(sub)
     return parser
 
 
@@ -58,11 +55,9 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    from .datasets.base import DatasetError
-
     try:
         rc = args.func(args)
-    except (UserError, DatasetError, FileNotFoundError, NotADirectoryError, PermissionError) as e:
+    except (SixdposeError, FileNotFoundError, NotADirectoryError, PermissionError) as e:
         print(f"sixdpose {args.command}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -19,13 +19,8 @@ def register(sub) -> None:
 
 
 def _run(args) -> int:
-    from ..cli import UserError
     from .fetch import fetch_ycb
-    from .ycb import AssetError
 
-    try:
-        got = fetch_ycb(args.to, args.objects, base_url=args.base_url, timeout=args.timeout, overwrite=args.overwrite)
-    except AssetError as e:
-        raise UserError(str(e)) from None
+    got = fetch_ycb(args.to, args.objects, base_url=args.base_url, timeout=args.timeout, overwrite=args.overwrite)
     print(f"fetched {len(got)} object(s) into {args.to}")
     return 0

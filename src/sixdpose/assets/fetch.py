@@ -8,6 +8,8 @@ symmetries; shipped with the package) is written for the objects present.
 
 from __future__ import annotations
 
+from ..fileio import atomic_write_text, claim_output_dir
+
 import csv
 import io
 import os
@@ -97,7 +99,7 @@ def fetch_ycb(to: str | os.PathLike, objects: list[str] | None = None, base_url:
     if unknown:
         raise AssetError(f"unknown YCB object(s): {', '.join(unknown)}")
     to = Path(to)
-    to.mkdir(parents=True, exist_ok=True)
+    claim_output_dir(to, "fetch-ycb", marker="objects.csv")
     fetched = []
     from tqdm import tqdm
 
@@ -132,9 +134,7 @@ def _write_catalogue(to: Path, rows: dict) -> None:
     w.writeheader()
     for n in present:
         w.writerow(rows[n])
-    tmp = to / ".objects.csv.tmp"
-    tmp.write_text(buf.getvalue())
-    os.replace(tmp, to / "objects.csv")
+    atomic_write_text(to / "objects.csv", buf.getvalue())
     from .ycb import load_catalog
 
     load_catalog.cache_clear()

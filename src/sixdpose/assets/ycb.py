@@ -7,6 +7,8 @@ of a simulated object is its mesh frame, so ground-truth poses map model points 
 
 from __future__ import annotations
 
+from ..errors import SixdposeError
+
 import csv
 import functools
 import os
@@ -19,7 +21,7 @@ ENV_VAR = "SIXDPOSE_YCB"
 MESH_SUBDIR = "google_16k"
 
 
-class AssetError(Exception):
+class AssetError(SixdposeError):
     """The asset directory, ``objects.csv`` or a model file is missing or malformed."""
 
 

@@ -1,5 +1,7 @@
-"""Dataset readers: the paper's synthetic layout and BOP, behind one interface (:mod:`.base`)."""
+"""Dataset readers: the paper's synthetic layout and BOP, behind one interface
+(:class:`~sixdpose.datasets.base.DatasetReader`); the synthetic layout's writer (:mod:`.layout`) and the
+PLY model files (:mod:`.ply`)."""
 
-from .base import DatasetError, Instance, ObjectModel, Sample, collate_samples, open_dataset
+from .base import DatasetError, DatasetReader, Instance, ObjectModel, Sample, as_reader, collate_samples, open_dataset
 
-__all__ = ["DatasetError", "Instance", "ObjectModel", "Sample", "collate_samples", "open_dataset"]
+__all__ = ["DatasetError", "DatasetReader", "Instance", "ObjectModel", "Sample", "as_reader", "collate_samples", "open_dataset"]

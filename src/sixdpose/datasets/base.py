@@ -9,11 +9,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from ..errors import SixdposeError
 
-class DatasetError(Exception):
+#: An image key: ``(scene_id, im_id)``.
+Key = tuple[int, int]
+
+
+class DatasetError(SixdposeError):
     """A dataset on disk is missing, incomplete or malformed; the message names the file or field."""
 
 
@@ -47,9 +53,9 @@ class Sample:
     Attributes:
         scene_id: scene number.
         im_id: image number (synthetic: the global image number ``#`` of the file names).
-        rgb: (H, W, 3) uint8.
+        rgb: (H, W, 3) uint8, or ``None`` when loaded with ``rgb=False``.
         depth: (H, W) float32 depth along the optical axis in metres, 0.0 where there is no
-            measurement; ``None`` if the split has no depth.
+            measurement; ``None`` if the split has no depth or it was loaded with ``depth=False``.
         K: (3, 3) float64 camera intrinsics (pixel-centre convention: pixel (u, v) has its centre at
             integer coordinates, so ``p = K @ p_C / z`` gives the pixel index directly).
         instances: annotated instances.
@@ -57,7 +63,7 @@ class Sample:
 
     scene_id: int
     im_id: int
-    rgb: np.ndarray
+    rgb: np.ndarray | None
     depth: np.ndarray | None
     K: np.ndarray
     instances: list[Instance] = field(default_factory=list)
@@ -74,6 +80,8 @@ class ObjectModel:
         colors: (N, 3) float64 RGB in [0, 1], or ``None``.
         diameter: largest distance between two model points, metres.
         symmetric: whether ADD-S (not ADD) applies.
+        mesh: ``(vertices (V, 3) float64 metres, faces (F, 3) int64)`` when the model file is a mesh,
+            else ``None`` (synthetic reference clouds are point clouds).
     """
 
     obj_name: str
@@ -83,6 +91,45 @@ class ObjectModel:
     colors: np.ndarray | None
     diameter: float
     symmetric: bool
+    mesh: tuple[np.ndarray, np.ndarray] | None = None
+
+
+@runtime_checkable
+class DatasetReader(Protocol):
+    """What every later stage needs of a dataset; :func:`open_dataset` returns one.
+
+    Implemented by :class:`~sixdpose.datasets.synthetic.SyntheticDataset` (the paper's layout) and
+    :class:`~sixdpose.datasets.bop.BopDataset`. A reader is also a ``torch`` map-style dataset
+    (``len(reader)``, ``reader[i]`` = ``reader.load(reader.keys()[i])``).
+
+    Attributes:
+        location: the directory that holds the images (synthetic: the dataset root; BOP: the split
+            folder), for messages.
+        has_depth: every image has a depth map. has_masks: every instance has a visible mask.
+    """
+
+    location: Path
+    has_depth: bool
+    has_masks: bool
+
+    def __len__(self) -> int:
+        """Number of images."""
+
+    def __getitem__(self, index: int) -> Sample:
+        """The ``index``-th image with everything loaded."""
+
+    def keys(self) -> list[Key]:
+        """``(scene_id, im_id)`` of every image in order (a cached list: do not modify it)."""
+
+    def load(self, key: Key, *, masks: bool = True, rgb: bool = True, depth: bool = True) -> Sample:
+        """Read one image; ``masks``/``rgb``/``depth`` False skip those files (the field is ``None``)."""
+
+    def model(self, obj_id: int) -> ObjectModel:
+        """The reference model of ``obj_id`` (cached)."""
+
+    @property
+    def object_ids(self) -> dict[int, str]:
+        """obj_id -> object name of every model of the dataset."""
 
 
 def collate_samples(batch: list[Sample]) -> list[Sample]:
@@ -107,30 +154,7 @@ def read_image(path: str | Path) -> np.ndarray:
         raise DatasetError(f"{path}: unreadable image ({e})") from None
 
 
-def read_ply(path: str | Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-    """Read a PLY point cloud or mesh (ascii or binary little endian) with Open3D.
-
-    Returns:
-        points (N, 3) float64 in the file's units, normals (N, 3) or ``None``, colors (N, 3) in [0, 1]
-        or ``None``.
-    Raises:
-        DatasetError: the file is missing or unreadable.
-    """
-    import open3d as o3d
-
-    path = Path(path)
-    if not path.is_file():
-        raise DatasetError(f"{path}: model file not found")
-    pcd = o3d.io.read_point_cloud(str(path))
-    if len(pcd.points) == 0:
-        raise DatasetError(f"{path}: no points could be read")
-    pts = np.asarray(pcd.points, dtype=np.float64)
-    nrm = np.asarray(pcd.normals, dtype=np.float64) if pcd.has_normals() else None
-    col = np.asarray(pcd.colors, dtype=np.float64) if pcd.has_colors() else None
-    return pts, nrm, col
-
-
-def open_dataset(path: str | Path, split: str = "test", **kwargs):
+def open_dataset(path: str | Path, split: str = "test", **kwargs) -> DatasetReader:
     """Open a dataset directory, detecting its layout.
 
     Args:
@@ -139,7 +163,8 @@ def open_dataset(path: str | Path, split: str = "test", **kwargs):
         split: BOP split name (ignored for the synthetic layout).
         **kwargs: passed to the reader class.
     Returns:
-        A :class:`~sixdpose.datasets.synthetic.SyntheticDataset` or ``BopDataset``.
+        A :class:`DatasetReader`: a :class:`~sixdpose.datasets.synthetic.SyntheticDataset` or a
+        :class:`~sixdpose.datasets.bop.BopDataset`.
     Raises:
         DatasetError: the directory does not exist or is neither layout.
     """
@@ -157,3 +182,16 @@ def open_dataset(path: str | Path, split: str = "test", **kwargs):
     raise DatasetError(
         f"{path}: not a dataset (no gt.yml for the synthetic layout, no models/models_info.json for BOP)"
     )
+
+
+def as_reader(data: "str | Path | DatasetReader", split: str = "test", **kwargs) -> DatasetReader:
+    """``data`` itself if it is already a :class:`DatasetReader`, else :func:`open_dataset` of the path.
+
+    Every stage entry point accepts a reader or a path through this function, so a dataset is opened
+    once and a caller can hand in a reader of its own (for example one that alters images).
+    """
+    if isinstance(data, DatasetReader):
+        if kwargs:
+            raise TypeError(f"reader options {sorted(kwargs)} apply only when a path is given")
+        return data
+    return open_dataset(data, split=split, **kwargs)

@@ -15,7 +15,7 @@ BOP layout of a dataset root ``B``::
 
 Everything is converted to metres on read. A split without ``depth/`` gives ``Sample.depth=None``;
 without ``mask_visib/`` every ``Instance.mask`` is ``None`` (see :attr:`BopDataset.has_depth` and
-:attr:`BopDataset.has_masks`).
+:attr:`BopDataset.has_masks`). :class:`BopDataset` is a :class:`~sixdpose.datasets.base.DatasetReader`.
 
 Two optional keys, ignored by the bop_toolkit, make the export of a synthetic dataset round-trip
 exactly: ``obj_name`` in ``models_info.json`` and ``inst`` (instance number of the object in its
@@ -96,6 +96,7 @@ class BopDataset:
             avail = sorted(p.name for p in self.root.iterdir() if p.is_dir() and p.name != models_dir)
             raise DatasetError(f"{split_dir}: split {split!r} not found (available: {', '.join(avail) or 'none'})")
         self.split_dir = split_dir
+        self.location = split_dir
         dirs = sorted(p for p in split_dir.iterdir() if p.is_dir() and p.name.isdigit())
         if scene_ids is not None:
             wanted = {int(s) for s in scene_ids}
@@ -129,18 +130,17 @@ class BopDataset:
         if not self.has_masks:
             log.info("%s: split %r has no mask_visib; Instance.mask will be None", self.root, split)
         self._models: dict[int, ObjectModel] = {}
-        self._meshes: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     # -- torch Dataset protocol -------------------------------------------------------------
     def __len__(self) -> int:
         return len(self._keys)
 
     def __getitem__(self, index: int) -> Sample:
-        return self.load_key(*self._keys[index])
+        return self.load(self._keys[index], masks=self.load_masks)
 
     def keys(self) -> list[tuple[int, int]]:
-        """``(scene_id, im_id)`` of every image, in order."""
-        return list(self._keys)
+        """``(scene_id, im_id)`` of every image, in order (cached; do not modify)."""
+        return self._keys
 
     # -- reading ----------------------------------------------------------------------------
     def _rgb_path(self, sid: int, im: int) -> Path:
@@ -152,34 +152,40 @@ class BopDataset:
                     return p
         raise DatasetError(f"{d / 'rgb' / f'{im:06d}.png'}: file not found")
 
-    def load_key(self, scene_id: int, im_id: int, with_masks: bool | None = None) -> Sample:
-        """Read image ``im_id`` of scene ``scene_id``: RGB, depth (metres or None), K, instances."""
-        scene_id, im_id = int(scene_id), int(im_id)
+    def load(self, key: tuple[int, int], *, masks: bool = True, rgb: bool = True, depth: bool = True) -> Sample:
+        """Read image ``key = (scene_id, im_id)``: RGB, depth (metres, or None when the split has none),
+        K and the instances. ``masks``/``rgb``/``depth`` False skip reading those files."""
+        try:
+            scene_id, im_id = (int(v) for v in key)
+        except (TypeError, ValueError):
+            raise DatasetError(f"{self.split_dir}: image key must be (scene_id, im_id), got {key!r}") from None
         if scene_id not in self._scene_dirs:
             raise DatasetError(f"{self.split_dir}: no scene {scene_id}")
         d = self._scene_dirs[scene_id]
         if im_id not in self._gt[scene_id]:
             raise DatasetError(f"{d / 'scene_gt.json'}: no image {im_id}")
-        rgb = read_image(self._rgb_path(scene_id, im_id))
-        if rgb.ndim == 2:
-            rgb = np.repeat(rgb[..., None], 3, axis=2)
-        rgb = rgb[..., :3].astype(np.uint8, copy=False)
+        rgb_im = None
+        if rgb:
+            rgb_im = read_image(self._rgb_path(scene_id, im_id))
+            if rgb_im.ndim == 2:
+                rgb_im = np.repeat(rgb_im[..., None], 3, axis=2)
+            rgb_im = rgb_im[..., :3].astype(np.uint8, copy=False)
         cam = self._cam[scene_id][im_id]
         try:
             K = np.asarray(cam["cam_K"], dtype=np.float64).reshape(3, 3)
         except (KeyError, ValueError, TypeError) as e:
             raise DatasetError(f"{d / 'scene_camera.json'}: image {im_id}: bad cam_K ({e})") from None
-        depth = None
+        depth_im = None
         dpath = d / "depth" / f"{im_id:06d}.png"
-        if (d / "depth").is_dir():
+        if depth and (d / "depth").is_dir():
             raw = read_image(dpath)
             if raw.ndim != 2:
                 raise DatasetError(f"{dpath}: expected a single-channel 16-bit depth image")
-            if raw.shape != rgb.shape[:2]:
-                raise DatasetError(f"{dpath}: shape {raw.shape} does not match the RGB image {rgb.shape[:2]}")
+            if rgb_im is not None and raw.shape != rgb_im.shape[:2]:
+                raise DatasetError(f"{dpath}: shape {raw.shape} does not match the RGB image {rgb_im.shape[:2]}")
             scale = float(cam.get("depth_scale", 1.0))
-            depth = (raw.astype(np.float32) * np.float32(scale / 1000.0)).astype(np.float32)
-        masks = (self.load_masks if with_masks is None else with_masks) and (d / "mask_visib").is_dir()
+            depth_im = (raw.astype(np.float32) * np.float32(scale / 1000.0)).astype(np.float32)
+        masks = masks and (d / "mask_visib").is_dir()
         gts = self._gt[scene_id][im_id]
         infos = (self._gt_info[scene_id] or {}).get(im_id)
         insts = []
@@ -204,7 +210,7 @@ class BopDataset:
                     px = int(mask.sum())
             name = str(self.models_info.get(oid, {}).get("obj_name", f"obj_{oid:06d}"))
             insts.append(Instance(name, oid, inst, R, t, mask, px))
-        return Sample(scene_id, im_id, rgb, depth, K, insts)
+        return Sample(scene_id, im_id, rgb_im, depth_im, K, insts)
 
     # -- models -----------------------------------------------------------------------------
     @property
@@ -220,14 +226,6 @@ class BopDataset:
 
     def _model_path(self, obj_id: int) -> Path:
         return self.models_path / f"obj_{obj_id:06d}.ply"
-
-    def model_mesh(self, obj_id: int) -> tuple[np.ndarray, np.ndarray] | None:
-        """``(vertices (V, 3) float64 metres, triangles (F, 3) int)`` of the model, or ``None`` if the
-        PLY has no faces. Used to sample a uniform reference surface for registration."""
-        obj_id = int(obj_id)
-        if obj_id not in self._meshes:
-            self.model(obj_id)
-        return self._meshes.get(obj_id)
 
     def model(self, obj_id: int) -> ObjectModel:
         """Reference model of ``obj_id`` (vertices in metres, normals, colours), cached.
@@ -249,8 +247,6 @@ class BopDataset:
             raise DatasetError(f"{path}: no vertices could be read")
         pts = np.asarray(mesh.vertices, dtype=np.float64) / 1000.0
         tris = np.asarray(mesh.triangles, dtype=np.int64)
-        if len(tris):
-            self._meshes[obj_id] = (pts, tris)
         if mesh.has_vertex_normals():
             nrm = np.asarray(mesh.vertex_normals, dtype=np.float64)
         elif len(tris):
@@ -263,7 +259,8 @@ class BopDataset:
         col = np.asarray(mesh.vertex_colors, dtype=np.float64) if mesh.has_vertex_colors() else None
         info = self.models_info[obj_id]
         m = ObjectModel(
-            self.object_ids[obj_id], obj_id, pts, nrm, col, float(info["diameter"]) / 1000.0, self.is_symmetric(obj_id)
+            self.object_ids[obj_id], obj_id, pts, nrm, col, float(info["diameter"]) / 1000.0, self.is_symmetric(obj_id),
+            mesh=(pts, tris) if len(tris) else None,
         )
         self._models[obj_id] = m
         return m
@@ -281,36 +278,13 @@ def _symmetry_axis(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return v[:, int(np.argmax(d))], c
 
 
-def _write_ply(path: Path, pts_mm: np.ndarray, nrm: np.ndarray | None, col: np.ndarray | None) -> None:
-    """Write a binary little-endian PLY point cloud (x y z [nx ny nz] [red green blue])."""
-    n = len(pts_mm)
-    fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
-    if nrm is not None:
-        fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
-    if col is not None:
-        fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
-    arr = np.empty(n, dtype=fields)
-    arr["x"], arr["y"], arr["z"] = pts_mm.T
-    if nrm is not None:
-        arr["nx"], arr["ny"], arr["nz"] = nrm.T
-    if col is not None:
-        c8 = np.clip(np.round(col * 255.0), 0, 255).astype(np.uint8)
-        arr["red"], arr["green"], arr["blue"] = c8.T
-    types = {"<f4": "float", "u1": "uchar"}
-    header = ["ply", "format binary_little_endian 1.0", f"element vertex {n}"]
-    header += [f"property {types[t]} {name}" for name, t in fields]
-    header += ["end_header"]
-    with open(path, "wb") as f:
-        f.write(("\n".join(header) + "\n").encode("ascii"))
-        f.write(arr.tobytes())
-
-
 def export_bop(dataset, out: str | Path, split: str = "test", depth_scale: float = 0.1, progress: bool = True) -> Path:
     """Write ``dataset`` (any reader of the :mod:`.base` interface) as a BOP dataset.
 
     Args:
         dataset: e.g. a :class:`~sixdpose.datasets.synthetic.SyntheticDataset`.
-        out: BOP root to create (must not already contain ``models/models_info.json``).
+        out: BOP root to create: a new or empty directory, or an unfinished export of ours (rewritten);
+            a finished export or any other non-empty directory is refused before anything is written.
         split: split folder name to write.
         depth_scale: BOP depth unit in mm (0.1 -> 16-bit range up to 6.55 m, resolution 0.1 mm);
             depths beyond the 16-bit range are written as 0 (no measurement) with a warning.
@@ -320,20 +294,25 @@ def export_bop(dataset, out: str | Path, split: str = "test", depth_scale: float
         ``symmetries_continuous`` entry whose axis is estimated from the model's principal axes
         (the bop_toolkit uses it only for MSSD/MSPD; ADD-S needs just the flag).
     Raises:
-        DatasetError: ``out`` already holds a BOP dataset.
+        DatasetError: ``out`` holds a finished export. OutputError: ``out`` is a non-empty directory
+            that is not an export of ours.
     """
-    from PIL import Image
     from tqdm import tqdm
 
+    from ..fileio import atomic_write_bytes, atomic_write_json, atomic_write_text, claim_output_dir
+    from .layout import png_bytes
+    from .ply import write_ply
+
     out = Path(out)
-    if (out / "models" / "models_info.json").exists():
-        raise DatasetError(f"{out}: already contains a BOP dataset (models/models_info.json); choose a new --out")
+    if (out / "models" / "models_info.json").exists() and (out / "dataset_info.md").exists():
+        raise DatasetError(f"{out}: already holds a finished export; choose a new --out")
+    claim_output_dir(out, "export-bop")  # an interrupted export of ours is rewritten; anything else refused
     (out / "models").mkdir(parents=True, exist_ok=True)
     info = {}
     for oid, name in sorted(dataset.object_ids.items()):
         m = dataset.model(oid)
         mm = m.points * 1000.0
-        _write_ply(out / "models" / f"obj_{oid:06d}.ply", mm, m.normals, m.colors)
+        write_ply(out / "models" / f"obj_{oid:06d}.ply", mm, m.normals, m.colors)
         lo, hi = mm.min(axis=0), mm.max(axis=0)
         e = {
             "diameter": m.diameter * 1000.0,
@@ -345,7 +324,7 @@ def export_bop(dataset, out: str | Path, split: str = "test", depth_scale: float
             axis, c = _symmetry_axis(mm)
             e["symmetries_continuous"] = [{"axis": axis.tolist(), "offset": c.tolist()}]
         info[str(oid)] = {k: (float(v) if isinstance(v, (np.floating, float)) else v) for k, v in e.items()}
-    (out / "models" / "models_info.json").write_text(json.dumps(info, indent=1))
+    atomic_write_json(out / "models" / "models_info.json", info)
 
     scenes: dict[int, dict[str, dict]] = {}
     cam_written = False
@@ -359,13 +338,13 @@ def export_bop(dataset, out: str | Path, split: str = "test", depth_scale: float
                 (sd / sub).mkdir(parents=True, exist_ok=True)
             scenes[s.scene_id] = {"gt": {}, "cam": {}, "info": {}}
         h, w = s.rgb.shape[:2]
-        Image.fromarray(s.rgb).save(sd / "rgb" / f"{s.im_id:06d}.png")
+        atomic_write_bytes(sd / "rgb" / f"{s.im_id:06d}.png", png_bytes(s.rgb))
         if s.depth is not None:
             raw = np.round(np.nan_to_num(s.depth, nan=0.0) * (1000.0 / depth_scale))
             over = raw > 65535
             n_clipped += int(over.sum())
             raw[over | (raw < 0)] = 0
-            Image.fromarray(raw.astype(np.uint16)).save(sd / "depth" / f"{s.im_id:06d}.png")
+            atomic_write_bytes(sd / "depth" / f"{s.im_id:06d}.png", png_bytes(raw.astype(np.uint16)))
         gts, infos = [], []
         for k, inst in enumerate(s.instances):
             gts.append({
@@ -376,7 +355,7 @@ def export_bop(dataset, out: str | Path, split: str = "test", depth_scale: float
             })
             gi = {"px_count_visib": int(inst.px_visib)}
             if inst.mask is not None:
-                Image.fromarray(inst.mask.astype(np.uint8) * 255).save(sd / "mask_visib" / f"{s.im_id:06d}_{k:06d}.png")
+                atomic_write_bytes(sd / "mask_visib" / f"{s.im_id:06d}_{k:06d}.png", png_bytes(inst.mask.astype(np.uint8) * 255))
                 ys, xs = np.nonzero(inst.mask)
                 bb = [int(xs.min()), int(ys.min()), int(xs.max() - xs.min() + 1), int(ys.max() - ys.min() + 1)] if len(xs) else [-1, -1, -1, -1]
                 gi["bbox_visib"] = bb
@@ -389,17 +368,18 @@ def export_bop(dataset, out: str | Path, split: str = "test", depth_scale: float
         if not cam_written:
             K = s.K
             cam = {"cx": K[0, 2], "cy": K[1, 2], "fx": K[0, 0], "fy": K[1, 1], "width": w, "height": h, "depth_scale": depth_scale}
-            (out / "camera.json").write_text(json.dumps({k: float(v) if k not in ("width", "height") else int(v) for k, v in cam.items()}, indent=2))
+            atomic_write_json(out / "camera.json", {k: float(v) if k not in ("width", "height") else int(v) for k, v in cam.items()}, indent=2)
             cam_written = True
     for sid, d in scenes.items():
         sd = out / split / f"{sid:06d}"
-        (sd / "scene_gt.json").write_text(json.dumps(d["gt"], indent=1))
-        (sd / "scene_camera.json").write_text(json.dumps(d["cam"], indent=1))
-        (sd / "scene_gt_info.json").write_text(json.dumps(d["info"], indent=1))
+        atomic_write_json(sd / "scene_gt.json", d["gt"])
+        atomic_write_json(sd / "scene_camera.json", d["cam"])
+        atomic_write_json(sd / "scene_gt_info.json", d["info"])
     if n_clipped:
         log.warning("%d depth pixels beyond the 16-bit range (%.2f m) were written as 0", n_clipped, 65.535 * depth_scale)
-    (out / "dataset_info.md").write_text(
-        f"# sixdpose synthetic dataset exported to BOP\n\nSource: {getattr(dataset, 'root', '?')}\n"
+    atomic_write_text(
+        out / "dataset_info.md",
+        f"# sixdpose synthetic dataset exported to BOP\n\nSource: {dataset.location}\n"
         f"Split: {split}; depth_scale {depth_scale} mm; models in mm; {len(keys)} images.\n"
         "Extra keys (ignored by bop_toolkit): models_info obj_name, scene_gt inst.\n"
     )

@@ -1,17 +1,5 @@
-"""Reader for the paper's synthetic layout (section III-C), as written by ``sixdpose generate``.
-
-Layout of a dataset directory ``D``::
-
-    D/RGB/#.png                      640x480 RGB
-    D/depth/#.npy                    float32 depth in metres, 0.0 where no surface is within range
-    D/masks/<object>/#_<inst>.png    binary visible mask (0/255) of one target instance
-    D/merged_masks/#.png             uint8, value = code(object) - instance (paper codes)
-    D/models/<object>.ply            coloured reference point cloud (metres, with normals)
-    D/models/models_info.yml         diameter and bounding box (min_x.., size_x..) per target
-    D/gt.yml                         per image: cam_K and, per visible target instance,
-                                     obj_name, obj_id, inst, R (3x3, X_CO), t (metres), px_visib
-    D/manifest.json                  generator version, config, seed, per-scene objects and images
-"""
+"""Reader for the paper's synthetic layout (section III-C; file names and encodings in
+:mod:`sixdpose.datasets.layout`), as written by ``sixdpose generate``."""
 
 from __future__ import annotations
 
@@ -21,7 +9,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .base import DatasetError, Instance, ObjectModel, Sample, read_image, read_ply
+from . import layout
+from .base import DatasetError, Instance, ObjectModel, Sample, read_image
+from .ply import read_ply
 
 try:  # fast YAML if libyaml is present
     _Loader = yaml.CSafeLoader
@@ -41,19 +31,22 @@ def load_yaml(path: Path):
 
 
 class SyntheticDataset:
-    """The synthetic dataset as a sequence of :class:`Sample` (usable as a ``torch`` Dataset).
+    """The synthetic dataset, a :class:`~sixdpose.datasets.base.DatasetReader` (and a ``torch`` Dataset).
 
     Args:
         root: dataset directory.
         image_ids: optional subset of image numbers (default: all images in ``gt.yml``).
-        load_masks: read the per-instance mask PNGs (default True).
+        load_masks: whether ``reader[i]`` reads the per-instance mask PNGs (default True).
     """
+
+    has_depth = True
+    has_masks = True
 
     def __init__(self, root: str | Path, image_ids=None, load_masks: bool = True):
         self.root = Path(root)
         if not self.root.is_dir():
             raise DatasetError(f"{self.root}: dataset directory not found")
-        gt_path = self.root / "gt.yml"
+        gt_path = self.root / layout.GT_FILE
         if not gt_path.is_file():
             raise DatasetError(
                 f"{gt_path}: missing; the generation run did not finish (run `sixdpose generate` again "
@@ -68,47 +61,67 @@ class SyntheticDataset:
         if missing:
             raise DatasetError(f"{gt_path}: no entry for image(s) {missing[:5]}")
         self.image_ids = ids
+        try:
+            self._keys: list[tuple[int, int]] = [(int(self.gt[i]["scene_id"]), i) for i in ids]
+        except (KeyError, TypeError, ValueError) as e:
+            raise DatasetError(f"{gt_path}: an image entry has no valid scene_id ({e})") from None
         self.load_masks = load_masks
-        manifest = self.root / "manifest.json"
+        manifest = self.root / layout.MANIFEST_FILE
         self.manifest = json.loads(manifest.read_text()) if manifest.is_file() else {}
         self._models: dict[int, ObjectModel] = {}
         self._info = None
+
+    @property
+    def location(self) -> Path:
+        """The dataset directory (where the images are)."""
+        return self.root
 
     # -- torch Dataset protocol -------------------------------------------------------------
     def __len__(self) -> int:
         return len(self.image_ids)
 
     def __getitem__(self, index: int) -> Sample:
-        return self.load(self.image_ids[index])
+        return self.load(self._keys[index], masks=self.load_masks)
 
     def keys(self) -> list[tuple[int, int]]:
-        """``(scene_id, im_id)`` of every image, in order."""
-        return [(int(self.gt[i]["scene_id"]), i) for i in self.image_ids]
+        """``(scene_id, im_id)`` of every image, in order (cached; do not modify)."""
+        return self._keys
 
     # -- reading ----------------------------------------------------------------------------
-    def load(self, im_id: int, with_masks: bool | None = None) -> Sample:
-        """Read image ``im_id`` (RGB, depth, K and its annotated instances)."""
-        if im_id not in self.gt:
-            raise DatasetError(f"{self.root / 'gt.yml'}: no image {im_id}")
-        entry = self.gt[im_id]
-        rgb = read_image(self.root / "RGB" / f"{im_id}.png")
-        if rgb.ndim != 3:
-            raise DatasetError(f"{self.root / 'RGB' / f'{im_id}.png'}: expected an RGB image")
-        rgb = rgb[..., :3]
-        dpath = self.root / "depth" / f"{im_id}.npy"
+    def load(self, key: tuple[int, int], *, masks: bool = True, rgb: bool = True, depth: bool = True) -> Sample:
+        """Read image ``key = (scene_id, im_id)``: RGB, depth (metres), K and its annotated instances.
+
+        ``masks``/``rgb``/``depth`` False skip reading those files (the fields are ``None``).
+        """
         try:
-            depth = np.load(dpath).astype(np.float32, copy=False)
-        except FileNotFoundError:
-            raise DatasetError(f"{dpath}: file not found") from None
-        except Exception as e:
-            raise DatasetError(f"{dpath}: unreadable depth ({e})") from None
-        if depth.shape != rgb.shape[:2]:
-            raise DatasetError(f"{dpath}: shape {depth.shape} does not match the RGB image {rgb.shape[:2]}")
+            scene_id, im_id = (int(v) for v in key)
+        except (TypeError, ValueError):
+            raise DatasetError(f"{self.root}: image key must be (scene_id, im_id), got {key!r}") from None
+        if im_id not in self.gt or int(self.gt[im_id].get("scene_id", -1)) != scene_id:
+            raise DatasetError(f"{self.root / 'gt.yml'}: no image {im_id} in scene {scene_id}")
+        entry = self.gt[im_id]
+        rgb_im = None
+        if rgb:
+            rgb_im = read_image(self.root / layout.rgb_file(im_id))
+            if rgb_im.ndim != 3:
+                raise DatasetError(f"{self.root / layout.rgb_file(im_id)}: expected an RGB image")
+            rgb_im = rgb_im[..., :3]
+        depth_im = None
+        if depth:
+            dpath = self.root / layout.depth_file(im_id)
+            try:
+                depth_im = np.load(dpath).astype(np.float32, copy=False)
+            except FileNotFoundError:
+                raise DatasetError(f"{dpath}: file not found") from None
+            except Exception as e:
+                raise DatasetError(f"{dpath}: unreadable depth ({e})") from None
+            if depth_im.ndim != 2 or (rgb_im is not None and depth_im.shape != rgb_im.shape[:2]):
+                raise DatasetError(f"{dpath}: shape {depth_im.shape} does not match the RGB image "
+                                   f"{None if rgb_im is None else rgb_im.shape[:2]}")
         try:
             K = np.asarray(entry["cam_K"], dtype=np.float64).reshape(3, 3)
         except (KeyError, ValueError) as e:
             raise DatasetError(f"{self.root / 'gt.yml'}: image {im_id}: bad cam_K ({e})") from None
-        masks = self.load_masks if with_masks is None else with_masks
         insts = []
         for k, o in enumerate(entry.get("objects") or []):
             try:
@@ -124,21 +137,21 @@ class SyntheticDataset:
             except (KeyError, ValueError, TypeError) as e:
                 raise DatasetError(f"{self.root / 'gt.yml'}: image {im_id} object {k}: bad field ({e})") from None
             if masks:
-                m = read_image(self.root / "masks" / name / f"{im_id}_{inst.inst}.png")
+                m = read_image(self.root / layout.mask_file(name, im_id, inst.inst))
                 inst.mask = m > 0 if m.ndim == 2 else m[..., 0] > 0
             insts.append(inst)
-        return Sample(int(entry["scene_id"]), im_id, rgb, depth, K, insts)
+        return Sample(scene_id, im_id, rgb_im, depth_im, K, insts)
 
     def merged_mask(self, im_id: int) -> np.ndarray:
         """The paper's merged mask of image ``im_id`` (uint8, value = code - instance)."""
-        return read_image(self.root / "merged_masks" / f"{im_id}.png")
+        return read_image(self.root / layout.merged_mask_file(im_id))
 
     # -- models -----------------------------------------------------------------------------
     @property
     def models_info(self) -> dict:
         """``models/models_info.yml`` as a dict keyed by object name."""
         if self._info is None:
-            self._info = load_yaml(self.root / "models" / "models_info.yml") or {}
+            self._info = load_yaml(self.root / layout.MODELS_INFO_FILE) or {}
         return self._info
 
     @property
@@ -154,8 +167,8 @@ class SyntheticDataset:
                 raise DatasetError(f"{self.root / 'models' / 'models_info.yml'}: no object with obj_id {obj_id}")
             name = names[obj_id]
             info = self.models_info[name]
-            pts, nrm, col = read_ply(self.root / "models" / f"{name}.ply")
-            self._models[obj_id] = ObjectModel(
-                name, obj_id, pts, nrm, col, float(info["diameter"]), bool(info.get("symmetric", False))
-            )
+            ply = read_ply(self.root / layout.model_file(name))
+            mesh = (ply.vertices, ply.faces) if ply.faces is not None and len(ply.faces) else None
+            self._models[obj_id] = ObjectModel(name, obj_id, ply.vertices, ply.normals, ply.colors, float(info["diameter"]),
+                                               bool(info.get("symmetric", False)), mesh=mesh)
         return self._models[obj_id]

@@ -25,11 +25,15 @@ def register(sub) -> None:
 
 
 def _run(args) -> int:
+    from ..artifacts.poses import read_results
     from ..datasets.base import open_dataset
-    from .evaluate import evaluate, load_results, write_tables
+    from ..fileio import claim_output_dir
+    from .evaluate import evaluate, write_tables
 
     res_path = Path(args.results)
-    ests = load_results(res_path)
+    out = Path(args.out) if args.out else res_path.with_name(res_path.stem + "_eval")
+    claim_output_dir(out, "evaluate")
+    ests = read_results(res_path)
     kw = {}
     if args.symmetric_ids:
         from ..cli import UserError
@@ -41,7 +45,6 @@ def _run(args) -> int:
     ds = open_dataset(args.data, split=args.split, **kw)
     res = evaluate(ds, ests, min_px=args.min_px, threshold=args.threshold, progress=True,
                    images=ds.keys() if args.all_images else None)
-    out = Path(args.out) if args.out else res_path.with_name(res_path.stem + "_eval")
     write_tables(res, out, label=args.label or res_path.stem)
     print(f"ADD(-S) accuracy {res.accuracy:.2f}% ({res.n_correct}/{res.n_gt} GT instances; mean over objects "
           f"{res.mean_object_accuracy:.2f}%), {res.fps:.3f} FPS, {res.instances_per_s:.3f} instances/s -> {out}")

@@ -36,8 +36,8 @@ def adds(R_est: np.ndarray, t_est: np.ndarray, R_gt: np.ndarray, t_gt: np.ndarra
     return float(d.mean())
 
 
-def add_s(R_est, t_est, R_gt, t_gt, pts, symmetric: bool) -> float:
-    """ADD(-S): :func:`adds` if ``symmetric`` else :func:`add`."""
+def add_or_adds(R_est, t_est, R_gt, t_gt, pts, symmetric: bool) -> float:
+    """ADD(-S), the paper's eq. (4): :func:`adds` if ``symmetric`` else :func:`add` (metres)."""
     return (adds if symmetric else add)(R_est, t_est, R_gt, t_gt, pts)
 
 

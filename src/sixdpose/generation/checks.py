@@ -25,8 +25,8 @@ def gt_surface_errors(dataset_dir: str | Path, assets: str | Path | None = None,
     catalog = load_catalog(resolve_assets_dir(assets))
     scenes: dict[str, o3d.t.geometry.RaycastingScene] = {}
     out = []
-    for im_id in ds.image_ids[: max_images or None]:
-        s = ds.load(im_id)
+    for key in ds.keys()[: max_images or None]:
+        s = ds.load(key)
         for inst in s.instances:
             if inst.obj_name not in scenes:
                 m = load_mesh(catalog[inst.obj_name].obj_path, with_texture=False)

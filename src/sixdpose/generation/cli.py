@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 
+from ..config import add_set_option, parse_overrides
 from .config import PROFILES
 
 
@@ -34,21 +35,19 @@ def register(sub) -> None:
     p.add_argument("--executor", default="local", choices=["local", "ray"], help="local processes or a Ray cluster")
     p.add_argument("--address", default=None, help="Ray cluster address (default: start a local instance)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_set_option(p)
     p.set_defaults(func=_run)
 
 
 def _run(args) -> int:
-    from ..assets import AssetError
-    from ..cli import UserError
     from .config import profile
-    from .runner import GenerationError, generate
+    from .runner import generate
 
-    try:
-        cfg = profile(args.profile, scenes=args.scenes, views=args.views, seed=args.seed)
-        res = generate(args.out, cfg, workers=args.workers, assets=args.assets, executor=args.executor,
-                       address=args.address, progress=not args.no_progress)
-    except (GenerationError, AssetError, ValueError) as e:
-        raise UserError(str(e)) from None
+    overrides = parse_overrides(args.overrides)
+    overrides.update({k: v for k, v in (("scenes", args.scenes), ("views", args.views), ("seed", args.seed)) if v is not None})
+    cfg = profile(args.profile, **overrides)
+    res = generate(args.out, cfg, workers=args.workers, assets=args.assets, executor=args.executor,
+                   address=args.address, progress=not args.no_progress)
     summary = {k: v for k, v in res.items() if k != "manifest"}
     print(json.dumps(summary, indent=None, default=float))
     if res["scenes_failed"]:

@@ -23,24 +23,17 @@ from ..constants import SYMMETRIC_OBJECTS, TARGET_OBJECTS, obj_id_of
 from .config import GenerationConfig
 from .config import profile as get_profile
 from .scene import camera_arc, default_pools, sample_scene, scene_rng
-from .writer import (
-    PARTIAL,
-    RECORDS,
-    atomic_write_text,
-    commit_scene,
-    finalize,
-    read_records,
-    scene_files,
-    write_attribution,
-    write_ply,
-    yaml_text,
-)
+from ..datasets.layout import model_file, write_models_info
+from ..datasets.ply import write_ply
+from ..errors import SixdposeError
+from ..fileio import atomic_write_text, claim_output_dir
+from .writer import PARTIAL, RECORDS, commit_scene, finalize, read_records, scene_files, write_attribution
 
 CONFIG_FILE = "config.yml"
 GENERATOR = f"sixdpose.generation {__version__}"
 
 
-class GenerationError(Exception):
+class GenerationError(SixdposeError):
     """Bad arguments or output directory; the message is one line naming the problem."""
 
 
@@ -160,7 +153,7 @@ def write_models(root: Path, cfg: GenerationConfig, catalog) -> None:
     for name in TARGET_OBJECTS:
         mesh = load_mesh(catalog[name].obj_path)
         pts, nrm, col = sample_surface(mesh, cfg.model_points, seed=obj_id_of(name))
-        write_ply(root / "models" / f"{name}.ply", pts, nrm, col)
+        write_ply(root / model_file(name), pts, nrm, col, comment="sixdpose reference model, metres")
         lo, hi = mesh.vertices.min(0), mesh.vertices.max(0)
         info[name] = {
             "obj_id": obj_id_of(name),
@@ -169,42 +162,31 @@ def write_models(root: Path, cfg: GenerationConfig, catalog) -> None:
             "size_x": float(hi[0] - lo[0]), "size_y": float(hi[1] - lo[1]), "size_z": float(hi[2] - lo[2]),
             "symmetric": name in SYMMETRIC_OBJECTS,
         }
-    atomic_write_text(root / "models" / "models_info.yml", yaml_text(info))
+    write_models_info(root, info)
 
 
 def prepare_output(out: Path, cfg: GenerationConfig) -> bool:
     """Check ``out`` can hold this dataset. Returns True if it resumes an existing one.
 
-    A non-empty directory is accepted only if it is a dataset of this generator made with the same
-    configuration (``scenes`` may grow: the run then extends it).
+    A non-empty directory is accepted only if it is a dataset of this generator (it has
+    ``config.yml``; :func:`sixdpose.fileio.claim_output_dir`) made with the same configuration
+    (``scenes`` may grow: the run then extends it).
 
     Raises:
-        GenerationError: ``out`` is a file, unwritable, foreign, or made with another configuration.
+        OutputError: ``out`` is a file, unwritable or foreign. GenerationError: made with another
+            configuration.
     """
-    if out.exists() and not out.is_dir():
-        raise GenerationError(f"{out}: exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()):
+    resume = claim_output_dir(out, "generate", marker=CONFIG_FILE, write_marker=False)
+    if resume:
         cfg_file = out / CONFIG_FILE
-        if not cfg_file.is_file():
-            raise GenerationError(f"{out}: directory is not empty and is not a sixdpose dataset (no {CONFIG_FILE})")
-        import yaml
-
         try:
-            old = GenerationConfig.from_dict(yaml.safe_load(cfg_file.read_text()))
-        except Exception as e:
-            raise GenerationError(f"{cfg_file}: unreadable dataset config ({e})") from None
-        if dataclasses.replace(old, scenes=cfg.scenes) != cfg:
+            old = GenerationConfig.load(cfg_file)
+        except SixdposeError as e:
+            raise GenerationError(f"unreadable dataset config ({e})") from None
+        if old.replace(scenes=cfg.scenes) != cfg:
             diff = [f.name for f in dataclasses.fields(cfg) if getattr(old, f.name) != getattr(cfg, f.name) and f.name != "scenes"]
             raise GenerationError(f"{out}: holds a dataset made with a different config ({', '.join(diff)}); use another --out")
-        if not os.access(out, os.W_OK):
-            raise GenerationError(f"{out}: directory is not writable")
-        return True
-    parent = out if out.is_dir() else out.parent
-    while not parent.exists():
-        parent = parent.parent
-    if not os.access(parent, os.W_OK):
-        raise GenerationError(f"{out}: cannot create output directory (no write permission in {parent})")
-    return False
+    return resume
 
 
 def generate(
@@ -234,10 +216,6 @@ def generate(
     Raises:
         GenerationError, AssetError: bad arguments (nothing is written then).
     """
-    try:
-        cfg.validate()
-    except ValueError as e:
-        raise GenerationError(str(e)) from None
     if workers < 1:
         raise GenerationError(f"--workers must be >= 1, got {workers}")
     if executor not in ("local", "ray"):
@@ -354,9 +332,7 @@ def ensure_dataset(path: str | os.PathLike, profile: str = "smoke", workers: int
     path = Path(path)
     cfg = get_profile(profile, **overrides)
     if (path / "gt.yml").is_file() and (path / CONFIG_FILE).is_file():
-        import yaml
-
-        if GenerationConfig.from_dict(yaml.safe_load((path / CONFIG_FILE).read_text())) == cfg and len(read_records(path)) >= cfg.scenes:
+        if GenerationConfig.load(path / CONFIG_FILE) == cfg and len(read_records(path)) >= cfg.scenes:
             return path
     generate(path, cfg, workers=workers or min(2, os.cpu_count() or 1))
     return path

@@ -2,23 +2,16 @@
 
 from __future__ import annotations
 
-import argparse
 import logging
 
-
-def _param(s: str) -> tuple[str, object]:
-    if "=" not in s:
-        raise argparse.ArgumentTypeError(f"--set expects NAME=VALUE, got {s!r}")
-    k, v = s.split("=", 1)
-    import yaml
-
-    return k.strip(), yaml.safe_load(v)
+from ..config import add_set_option, parse_overrides
 
 
 def register(sub) -> None:
     """Add the ``register`` subcommand."""
     p = sub.add_parser("register", help="hybrid pose estimation (RANSAC / FGR / Super4PCS [+ ICP])",
-                       description="Register every instance of a dataset split; write a BOP results CSV.")
+                       description="Register every instance of a dataset split; write a BOP results CSV and, "
+                                   "beside it, <out>.config.yml (the parameters used).")
     p.add_argument("--data", required=True, help="dataset directory (synthetic layout or BOP root)")
     p.add_argument("--method", required=True, choices=["ransac", "fgr", "super4pcs"])
     p.add_argument("--icp", action="store_true", help="refine with ICP (point-to-plane by default)")
@@ -26,8 +19,7 @@ def register(sub) -> None:
     p.add_argument("--split", default="test", help="BOP split (ignored for the synthetic layout)")
     p.add_argument("--out", required=True, help="results CSV to write")
     p.add_argument("--preset", default="default", help="parameter preset: default | paper")
-    p.add_argument("--set", dest="overrides", action="append", type=_param, default=[], metavar="NAME=VALUE",
-                   help="override one preset field, e.g. --set s4pcs_samples=300 (repeatable)")
+    add_set_option(p)
     p.add_argument("--workers", type=int, default=2, help="processes (default 2)")
     p.add_argument("--limit", type=int, default=None, help="only the first N images")
     p.add_argument("--stride", type=int, default=1, help="only every N-th image (a fixed subset spread over the scenes)")
@@ -39,45 +31,37 @@ def register(sub) -> None:
 
 
 def _run(args) -> int:
+    from pathlib import Path
+
+    from ..artifacts.poses import RESULTS_HEADER, write_results
+    from ..artifacts.tables import write_table
     from ..cli import UserError
+    from ..datasets.base import open_dataset
+    from ..fileio import claim_output_file
     from .presets import get_preset
-    from .runner import run_registration, write_results
+    from .runner import run_registration
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    try:
-        cfg = get_preset(args.preset, **dict(args.overrides))
-    except (ValueError, TypeError) as e:
-        raise UserError(str(e)) from None
+    cfg = get_preset(args.preset, **parse_overrides(args.overrides))
     if args.workers < 1:
         raise UserError("--workers must be >= 1")
     if args.stride < 1:
         raise UserError("--stride must be >= 1")
-    indices = None
-    if args.stride > 1:
-        from ..datasets.base import open_dataset
-
-        try:
-            indices = range(0, len(open_dataset(args.data, split=args.split)), args.stride)
-        except Exception:  # an unreadable dataset is reported by run_registration below
-            indices = None
+    out = Path(args.out)
+    claim_output_file(out, RESULTS_HEADER)  # refuse a foreign file before any work
+    ds = open_dataset(args.data, split=args.split)
+    indices = range(0, len(ds), args.stride) if args.stride > 1 else None
     failures: list = []
-    rows = run_registration(args.data, args.method, icp=args.icp, masks=args.masks, split=args.split, cfg=cfg,
-                            workers=args.workers, limit=args.limit, min_px=args.min_px,
-                            min_score=args.min_score, progress=not args.no_progress, indices=indices,
-                            failures=failures)
-    write_results(rows, args.out)
+    rows = run_registration(ds, args.method, icp=args.icp, masks=args.masks, cfg=cfg, workers=args.workers,
+                            limit=args.limit, min_px=args.min_px, min_score=args.min_score,
+                            progress=not args.no_progress, indices=indices, failures=failures)
+    write_results(rows, out)
+    cfg.save(out.with_name(out.stem + ".config.yml"))
     n_bad = sum(1 for r in rows if r.reason)
-    msg = f"wrote {len(rows)} estimates ({n_bad} with score 0) to {args.out}"
+    msg = f"wrote {len(rows)} estimates ({n_bad} with score 0) to {out}"
     if failures:
-        import csv
-        from pathlib import Path
-
-        out = Path(args.out)
         fpath = out.with_name(out.stem + "_skipped_images.csv")
-        with open(fpath, "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["scene_id", "im_id", "reason"])
-            w.writerows(failures)
+        write_table([dict(zip(("scene_id", "im_id", "reason"), f)) for f in failures], ["scene_id", "im_id", "reason"], fpath)
         msg += f"; {len(failures)} unreadable image(s) skipped, listed in {fpath}"
     print(msg)
     return 0

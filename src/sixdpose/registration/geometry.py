@@ -161,15 +161,31 @@ def model_reference(model, voxel: float, fpfh_radius: float | None = None, mesh=
 
 
 class ReferenceCache:
-    """Per-process cache of :class:`Reference` objects keyed by (obj_id, voxel, fpfh_radius).
+    """Per-process cache of the model-side data of registration: :class:`Reference` clouds keyed by
+    (obj_id, voxel, fpfh_radius) and colour grids keyed by (obj_id, cells, smoothing).
 
     Args:
-        dataset: a reader with ``model(obj_id)`` (and optionally ``model_mesh(obj_id)``).
+        dataset: a :class:`~sixdpose.datasets.base.DatasetReader` (its ``model(obj_id)``).
     """
 
     def __init__(self, dataset):
         self.dataset = dataset
         self._refs: dict[tuple, Reference] = {}
+        self._grids: dict[tuple, object] = {}
+
+    def colour_grid(self, obj_id: int, cells: int, smooth_rel: float):
+        """The :class:`~sixdpose.registration.verify.ColourGrid` of ``obj_id`` (None if the model has no
+        colours); returns ``(grid, seconds spent building it now)`` (0.0 when it was cached)."""
+        key = (int(obj_id), int(cells), float(smooth_rel))
+        if key in self._grids:
+            return self._grids[key], 0.0
+        from .verify import build_grid
+
+        model = self.dataset.model(obj_id)
+        grid = None if model.colors is None else build_grid(model.points, model.colors, model.diameter, cells=cells,
+                                                              smooth_rel=smooth_rel)
+        self._grids[key] = grid
+        return grid, (0.0 if grid is None else grid.time)
 
     def get(self, obj_id: int, voxel: float, fpfh_radius: float | None) -> tuple[Reference, float]:
         """Return ``(reference, seconds spent building it now)`` (0.0 when it was cached)."""
@@ -177,7 +193,6 @@ class ReferenceCache:
         if key in self._refs:
             return self._refs[key], 0.0
         model = self.dataset.model(obj_id)
-        mesh = self.dataset.model_mesh(obj_id) if hasattr(self.dataset, "model_mesh") else None
-        ref = model_reference(model, voxel, fpfh_radius, mesh=mesh)
+        ref = model_reference(model, voxel, fpfh_radius, mesh=model.mesh)
         self._refs[key] = ref
         return ref, ref.prep_time

@@ -1,7 +1,7 @@
 """The hybrid pose methods of section IV-B: RANSAC and FGR on FPFH features (Open3D), Super4PCS,
 each optionally refined by ICP (point-to-point or point-to-plane, Open3D).
 
-Every method has the same signature ``method(scene, ref, cfg) -> PoseEstimate``:
+Every method has the same signature ``method(scene, ref, cfg) -> Registration``:
 
 * ``scene``: a :class:`SceneCloud` (the masked camera-frame cloud, prepared by :func:`prepare_scene`),
 * ``ref``: the object's :class:`~sixdpose.registration.geometry.Reference`,
@@ -51,16 +51,16 @@ class SceneCloud:
 
 
 @dataclass
-class PoseEstimate:
-    """Output of a method.
+class Registration:
+    """Output of a method for one instance.
 
     Attributes:
-        T: (4, 4) ``X_CO`` (object in camera; metres). score: fitness in [0, 1] (inlier fraction of
-        the scene cloud; LCP for Super4PCS). time: seconds, every step but disk reads.
-        info: method-specific diagnostics.
+        X_CO: (4, 4) pose of the object in the camera frame (metres). score: fitness in [0, 1]
+        (inlier fraction of the scene cloud; LCP for Super4PCS). time: seconds, every step but disk
+        reads. info: method-specific diagnostics.
     """
 
-    T: np.ndarray
+    X_CO: np.ndarray
     score: float
     time: float
     info: dict = field(default_factory=dict)
@@ -97,14 +97,15 @@ def prepare_scene(points: np.ndarray, diameter: float, cfg: RegistrationConfig, 
     return SceneCloud(pcd, unit, feat, time.perf_counter() - t0)
 
 
-def _invert(T: np.ndarray) -> np.ndarray:
-    Ti = np.eye(4)
-    Ti[:3, :3] = T[:3, :3].T
-    Ti[:3, 3] = -T[:3, :3].T @ T[:3, 3]
-    return Ti
+def _invert(X_AB: np.ndarray) -> np.ndarray:
+    """``X_BA`` from ``X_AB`` (rigid 4x4 inverse)."""
+    X_BA = np.eye(4)
+    X_BA[:3, :3] = X_AB[:3, :3].T
+    X_BA[:3, 3] = -X_AB[:3, :3].T @ X_AB[:3, 3]
+    return X_BA
 
 
-def register_ransac(scene: SceneCloud, ref: Reference, cfg: RegistrationConfig) -> PoseEstimate:
+def register_ransac(scene: SceneCloud, ref: Reference, cfg: RegistrationConfig) -> Registration:
     """RANSAC on FPFH correspondences (Open3D ``registration_ransac_based_on_feature_matching``).
 
     Returns the pose ``X_CO``; score = RANSAC fitness (inlier fraction of the scene cloud).
@@ -127,11 +128,11 @@ def register_ransac(scene: SceneCloud, ref: Reference, cfg: RegistrationConfig) 
         [reg.CorrespondenceCheckerBasedOnEdgeLength(cfg.ransac_edge_length), reg.CorrespondenceCheckerBasedOnDistance(dist)],
         reg.RANSACConvergenceCriteria(cfg.ransac_max_iteration, cfg.ransac_confidence),
     )
-    T = _invert(np.asarray(res.transformation))
-    return PoseEstimate(T, float(res.fitness), time.perf_counter() - t0, {"inlier_rmse": float(res.inlier_rmse)})
+    X_CO = _invert(np.asarray(res.transformation))  # Open3D returns X_OC (scene -> model)
+    return Registration(X_CO, float(res.fitness), time.perf_counter() - t0, {"inlier_rmse": float(res.inlier_rmse)})
 
 
-def register_fgr(scene: SceneCloud, ref: Reference, cfg: RegistrationConfig) -> PoseEstimate:
+def register_fgr(scene: SceneCloud, ref: Reference, cfg: RegistrationConfig) -> Registration:
     """Fast Global Registration on FPFH features (Open3D ``registration_fgr_based_on_feature_matching``).
 
     Returns the pose ``X_CO``; score = fitness at the FGR distance (inlier fraction of the scene).
@@ -143,12 +144,12 @@ def register_fgr(scene: SceneCloud, ref: Reference, cfg: RegistrationConfig) -> 
     dist = cfg.fgr_distance_factor * scene.voxel
     opt = reg.FastGlobalRegistrationOption(maximum_correspondence_distance=dist, iteration_number=cfg.fgr_iterations)
     res = reg.registration_fgr_based_on_feature_matching(scene.pcd, ref.pcd, scene.fpfh, ref.fpfh, opt)
-    Tsm = np.asarray(res.transformation)
-    ev = reg.evaluate_registration(scene.pcd, ref.pcd, max(dist, cfg.ransac_distance_factor * scene.voxel), Tsm)
-    return PoseEstimate(_invert(Tsm), float(ev.fitness), time.perf_counter() - t0, {})
+    X_OC = np.asarray(res.transformation)  # scene (camera) -> model (object)
+    ev = reg.evaluate_registration(scene.pcd, ref.pcd, max(dist, cfg.ransac_distance_factor * scene.voxel), X_OC)
+    return Registration(_invert(X_OC), float(ev.fitness), time.perf_counter() - t0, {})
 
 
-def register_super4pcs(scene: SceneCloud, ref: Reference, cfg: RegistrationConfig) -> PoseEstimate:
+def register_super4pcs(scene: SceneCloud, ref: Reference, cfg: RegistrationConfig) -> Registration:
     """Super4PCS with normals (:func:`~sixdpose.registration.super4pcs.super4pcs`).
 
     The LCP is verified against a reference cloud 3x denser than ``ref`` when ``ref.extra`` has one
@@ -159,30 +160,14 @@ def register_super4pcs(scene: SceneCloud, ref: Reference, cfg: RegistrationConfi
     t0 = time.perf_counter()
     delta = cfg.s4pcs_delta if cfg.s4pcs_delta_rel is None else cfg.s4pcs_delta_rel * ref.diameter
     ver = ref.extra.get("verify")
-    res = super4pcs(
-        scene.points,
-        scene.normals,
-        ref.points,
-        ref.normals,
-        overlap=cfg.s4pcs_overlap,
-        delta=delta,
-        n_samples=cfg.s4pcs_samples,
-        n_bases=cfg.s4pcs_bases,
-        max_time=cfg.s4pcs_max_time,
-        normal_tol_deg=cfg.s4pcs_normal_tol_deg,
-        stop_lcp=cfg.s4pcs_stop_lcp,
-        max_candidates=cfg.s4pcs_max_candidates,
-        max_pairs=cfg.s4pcs_max_pairs,
-        seed=cfg.seed,
-        Q_verify=None if ver is None else ver[0],
-        Qn_verify=None if ver is None else ver[1],
-    )
+    res = super4pcs(scene.points, scene.normals, ref.points, ref.normals, cfg, delta=delta,
+                    Q_verify=None if ver is None else ver[0], Qn_verify=None if ver is None else ver[1])
     info = {"n_bases": res.n_bases, "n_congruent": res.n_congruent, "n_verified": res.n_verified}
-    return PoseEstimate(_invert(res.T), float(res.lcp), time.perf_counter() - t0, info)
+    return Registration(_invert(res.T), float(res.lcp), time.perf_counter() - t0, info)  # res.T maps scene onto model: X_OC
 
 
-def refine_icp(scene: SceneCloud, ref: Reference, T_co: np.ndarray, cfg: RegistrationConfig) -> PoseEstimate:
-    """ICP refinement (Open3D ``registration_icp``) of the pose ``T_co`` (X_CO, 4x4).
+def refine_icp(scene: SceneCloud, ref: Reference, X_CO: np.ndarray, cfg: RegistrationConfig) -> Registration:
+    """ICP refinement (Open3D ``registration_icp``) of the pose ``X_CO`` (4x4).
 
     ``cfg.icp_kind``: ``"point_to_plane"`` (model normals) or ``"point_to_point"``; correspondence
     distance ``cfg.icp_distance_factor`` x the scene voxel. Returns the refined ``X_CO`` with the ICP
@@ -200,9 +185,9 @@ def refine_icp(scene: SceneCloud, ref: Reference, T_co: np.ndarray, cfg: Registr
         raise ValueError(f"icp_kind must be point_to_plane or point_to_point, got {cfg.icp_kind!r}")
     dist = cfg.icp_distance_factor * scene.voxel
     res = reg.registration_icp(
-        scene.pcd, ref.pcd, dist, _invert(T_co), est, reg.ICPConvergenceCriteria(max_iteration=cfg.icp_max_iteration)
+        scene.pcd, ref.pcd, dist, _invert(X_CO), est, reg.ICPConvergenceCriteria(max_iteration=cfg.icp_max_iteration)
     )
-    return PoseEstimate(_invert(np.asarray(res.transformation)), float(res.fitness), time.perf_counter() - t0, {})
+    return Registration(_invert(np.asarray(res.transformation)), float(res.fitness), time.perf_counter() - t0, {})
 
 
 _FUNCS = {"ransac": register_ransac, "fgr": register_fgr, "super4pcs": register_super4pcs}
@@ -223,24 +208,6 @@ def get_reference(cache: ReferenceCache, obj_id: int, method: str, cfg: Registra
     return ref, dt
 
 
-def get_colour_grid(cache: ReferenceCache, obj_id: int, cfg: RegistrationConfig):
-    """The cached :class:`~sixdpose.registration.verify.ColourGrid` of ``obj_id`` (None if the model
-    has no colours); returns ``(grid, seconds spent building it now)``."""
-    key = ("colour_grid", int(obj_id), cfg.cv_grid_cells, cfg.cv_smooth_rel)
-    store = cache.__dict__.setdefault("_grids", {})
-    if key in store:
-        return store[key], 0.0
-    from .verify import build_grid
-
-    model = cache.dataset.model(obj_id)
-    if model.colors is None:
-        store[key] = None
-        return None, 0.0
-    grid = build_grid(model.points, model.colors, model.diameter, cells=cfg.cv_grid_cells, smooth_rel=cfg.cv_smooth_rel)
-    store[key] = grid
-    return grid, grid.time
-
-
 def estimate_pose(
     points: np.ndarray,
     obj_id: int,
@@ -249,7 +216,7 @@ def estimate_pose(
     cfg: RegistrationConfig,
     icp: bool = False,
     colors: np.ndarray | None = None,
-) -> PoseEstimate:
+) -> Registration:
     """Full per-instance pipeline: scene preparation, global registration, optional ICP.
 
     Args:
@@ -263,7 +230,7 @@ def estimate_pose(
             and, if a rotation about the centroid agrees better with the colours, replaced (and refined
             by ICP again when ``icp``).
     Returns:
-        :class:`PoseEstimate` whose ``time`` includes scene preparation, the first-use cost of the
+        :class:`Registration` whose ``time`` includes scene preparation, the first-use cost of the
         model's reference (charged once per process), the method and ICP.
     """
     if method not in _FUNCS:
@@ -271,32 +238,27 @@ def estimate_pose(
     ref, t_ref = get_reference(cache, obj_id, method, cfg)
     scene = prepare_scene(points, ref.diameter, cfg, features=method in ("ransac", "fgr"))
     if len(scene.points) < 3:
-        return PoseEstimate(np.eye(4), 0.0, scene.time + t_ref, {"reason": "fewer than 3 points after gating"})
+        return Registration(np.eye(4), 0.0, scene.time + t_ref, {"reason": "fewer than 3 points after gating"})
     est = _FUNCS[method](scene, ref, cfg)
     total = t_ref + scene.time + est.time
     info = dict(est.info, global_score=est.score, n_scene=len(scene.points))
-    T, score = est.T, est.score
+    X_CO, score = est.X_CO, est.score
     if icp:
-        r = refine_icp(scene, ref, T, cfg)
+        r = refine_icp(scene, ref, X_CO, cfg)
         total += r.time
-        T, score = r.T, r.score
+        X_CO, score = r.X_CO, r.score
     if cfg.colour_verify and colors is not None and len(colors) == len(points):
-        grid, t_grid = get_colour_grid(cache, obj_id, cfg)
+        grid, t_grid = cache.colour_grid(obj_id, cfg.cv_grid_cells, cfg.cv_smooth_rel)
         if grid is not None:
             from .verify import colour_search
 
             t0 = time.perf_counter()
-            res = colour_search(
-                T, points, colors, grid, ref.diameter, n_rot=cfg.cv_rotations, n_points=cfg.cv_points,
-                n_points_fine=cfg.cv_points_fine, tol_rel=cfg.cv_tol_rel, coarse_sigma_rel=cfg.cv_coarse_sigma_rel,
-                geo_weight=cfg.cv_geo_weight, smooth_rel=cfg.cv_smooth_rel, n_keep=cfg.cv_keep, n_refine=cfg.cv_refine,
-                n_pert=cfg.cv_perturbations, refine_deg=cfg.cv_refine_deg, min_gain=cfg.cv_min_gain, seed=cfg.seed,
-            )
+            res = colour_search(X_CO, points, colors, grid, ref.diameter, cfg)
             info.update(colour_changed=res.changed, colour_corr=res.col)
             if res.changed:
-                T = res.T
+                X_CO = res.X_CO
                 if icp:
-                    r = refine_icp(scene, ref, T, cfg)
-                    T, score = r.T, r.score
+                    r = refine_icp(scene, ref, X_CO, cfg)
+                    X_CO, score = r.X_CO, r.score
             total += t_grid + time.perf_counter() - t0
-    return PoseEstimate(T, score, total, info)
+    return Registration(X_CO, score, total, info)

@@ -92,11 +92,13 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass
+
+from ..config import Config, from_profile
 
 
 @dataclass(frozen=True)
-class RegistrationConfig:
+class RegistrationConfig(Config):
     """Parameters of the hybrid pipeline. Lengths ending in ``_rel`` are fractions of the object
     diameter; the others are metres. ``None`` disables the step.
 
@@ -113,11 +115,20 @@ class RegistrationConfig:
         ransac_confidence, ransac_n, ransac_edge_length, ransac_mutual_filter: Open3D RANSAC options.
         fgr_distance_factor, fgr_iterations: Open3D FGR options.
         s4pcs_overlap, s4pcs_delta, s4pcs_delta_rel, s4pcs_samples, s4pcs_bases, s4pcs_normal_tol_deg,
-        s4pcs_stop_lcp, s4pcs_max_candidates, s4pcs_max_time: Super4PCS options (see
-        :func:`~sixdpose.registration.super4pcs.super4pcs`); ``s4pcs_delta_rel`` wins over ``s4pcs_delta``.
+        s4pcs_stop_lcp, s4pcs_max_candidates, s4pcs_max_pairs, s4pcs_max_time, s4pcs_pair_tol_factor,
+        s4pcs_max_q, s4pcs_join_budget: Super4PCS options (each described at
+        :func:`~sixdpose.registration.super4pcs.super4pcs`); ``s4pcs_delta_rel`` (x diameter) wins
+        over ``s4pcs_delta`` (metres).
         icp_kind: ``"point_to_plane"`` or ``"point_to_point"``. icp_distance_factor: correspondence
         distance in voxels. icp_max_iteration: iterations.
-        seed: random seed of RANSAC and Super4PCS.
+        colour_verify: run the colour verification step (:mod:`~sixdpose.registration.verify`; not in
+        the paper) after the geometric pose.
+        cv_rotations, cv_points, cv_points_fine, cv_tol_rel, cv_coarse_sigma_rel, cv_geo_weight,
+        cv_smooth_rel, cv_keep, cv_nms_deg, cv_refine, cv_perturbations, cv_refine_deg, cv_min_gain:
+        the colour search (each described at :func:`~sixdpose.registration.verify.colour_search`).
+        cv_grid_cells: cells along the longest side of the per-object colour grid
+        (:func:`~sixdpose.registration.verify.build_grid`).
+        seed: random seed of RANSAC, Super4PCS and the colour search.
     """
 
     scene_voxel_rel: float | None = 0.03
@@ -146,6 +157,9 @@ class RegistrationConfig:
     s4pcs_max_candidates: int = 10000
     s4pcs_max_pairs: int = 5000
     s4pcs_max_time: float | None = 0.5
+    s4pcs_pair_tol_factor: float = 1.0
+    s4pcs_max_q: int | None = 1000
+    s4pcs_join_budget: int | None = None
     icp_kind: str = "point_to_plane"
     icp_distance_factor: float = 2.0
     icp_max_iteration: int = 30
@@ -162,16 +176,27 @@ class RegistrationConfig:
     cv_perturbations: int = 48
     cv_refine_deg: float = 30.0
     cv_min_gain: float = 0.02
+    cv_nms_deg: float = 30.0
     cv_grid_cells: int = 64
     seed: int = 0
-    extra: dict = field(default_factory=dict, compare=False)
 
-    def with_overrides(self, **kw) -> "RegistrationConfig":
-        """A copy with some fields replaced; unknown names raise ``ValueError`` naming them."""
-        bad = sorted(set(kw) - set(asdict(self)))
-        if bad:
-            raise ValueError(f"unknown registration parameter(s): {', '.join(bad)}")
-        return replace(self, **kw)
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the first invalid field."""
+        if self.icp_kind not in ("point_to_plane", "point_to_point"):
+            raise ValueError(f"icp_kind must be point_to_plane or point_to_point, got {self.icp_kind!r}")
+        for name in ("normal_knn", "fpfh_max_nn", "ransac_max_iteration", "ransac_n", "fgr_iterations", "s4pcs_samples",
+                     "s4pcs_max_candidates", "s4pcs_max_pairs", "icp_max_iteration", "cv_rotations", "cv_points",
+                     "cv_points_fine", "cv_keep", "cv_perturbations", "cv_grid_cells"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if not 0 < self.s4pcs_overlap <= 1:
+            raise ValueError(f"s4pcs_overlap must be in (0, 1], got {self.s4pcs_overlap}")
+        if not 0 < self.ransac_confidence <= 1:
+            raise ValueError(f"ransac_confidence must be in (0, 1], got {self.ransac_confidence}")
+        for name in ("scene_voxel_rel", "model_voxel_rel", "s4pcs_delta_rel", "gate_rel"):
+            v = getattr(self, name)
+            if v is not None and v <= 0:
+                raise ValueError(f"{name} must be > 0 or null, got {v}")
 
 
 PRESETS: dict[str, RegistrationConfig] = {
@@ -197,7 +222,6 @@ PRESETS: dict[str, RegistrationConfig] = {
 
 
 def get_preset(name: str, **overrides) -> RegistrationConfig:
-    """The preset ``name`` (``paper`` or ``default``) with optional field overrides."""
-    if name not in PRESETS:
-        raise ValueError(f"unknown preset {name!r} (choose from {', '.join(PRESETS)})")
-    return PRESETS[name].with_overrides(**overrides) if overrides else PRESETS[name]
+    """The preset ``name`` (``paper`` or ``default``) with optional field overrides; raises
+    :class:`~sixdpose.errors.ConfigError` for an unknown preset, field or value."""
+    return from_profile(PRESETS, name, overrides)

@@ -239,53 +239,53 @@ def super4pcs(
     Pn: np.ndarray | None,
     Q: np.ndarray,
     Qn: np.ndarray | None,
-    overlap: float = 0.7,
-    delta: float = 0.01,
-    n_samples: int = 200,
-    n_bases: int | None = None,
-    max_time: float | None = None,
-    normal_tol_deg: float | None = 25.0,
-    stop_lcp: float = 0.98,
-    max_candidates: int = 200000,
-    max_pairs: int = 50000,
-    pair_tol_factor: float = 1.0,
-    refine: bool = False,
-    seed: int = 0,
-    max_q: int | None = 1000,
+    cfg: "RegistrationConfig | None" = None,
+    *,
+    delta: float | None = None,
     Q_verify: np.ndarray | None = None,
     Qn_verify: np.ndarray | None = None,
-    join_budget: int | None = None,
 ) -> Super4PCSResult:
     """Register ``P`` onto ``Q`` with Super4PCS (normals optional).
 
     Args:
         P: (N, 3) source points (metres), e.g. the masked scene cloud. Pn: (N, 3) unit normals or None.
         Q: (M, 3) target points, e.g. the object model. Qn: (M, 3) unit normals or None.
-        overlap: expected fraction of ``P`` lying on ``Q`` (paper: 0.7); sets the base width
-            (``overlap`` x the extent of ``P``) and the number of bases.
-        delta: registration accuracy in metres (paper: 0.01): pair length, intermediate point and
-            LCP tolerance.
-        n_samples: points sampled on ``P`` (paper: 200); ``Q`` is sampled at the same density.
-        n_bases: bases to try (default: enough to draw one all-inlier base with 99.9% probability,
-            ``ceil(log(0.001) / log(1 - overlap^4))``).
-        max_time: wall-clock limit in seconds (None: no limit).
-        normal_tol_deg: normal-angle tolerance for pair filtering and set verification (None: do not
-            use normals).
-        stop_lcp: stop as soon as a transform reaches this LCP.
-        max_candidates: at most this many congruent sets are scored per base (random subset).
-        max_pairs: at most this many candidate pairs per base diagonal (random subset); bounds the
-            cost when ``delta`` is large compared to the sample spacing.
-        pair_tol_factor: pair length / intermediate point tolerance is ``max(delta, factor x sample
-            spacing)``.
-        refine: re-fit the best transform once on its LCP inlier correspondences (least squares).
-        seed: random seed (the result is deterministic for a given seed).
-        max_q: at most this many samples of ``Q`` (random subset; None: no limit).
+        cfg: a :class:`~sixdpose.registration.presets.RegistrationConfig` (default: the ``default``
+            preset); its ``s4pcs_*`` fields are the algorithm's parameters and ``seed`` its random
+            seed (the result is deterministic for a given seed):
+
+            * ``s4pcs_overlap``: expected fraction of ``P`` lying on ``Q`` (paper: 0.7); sets the base
+              width (overlap x the extent of ``P``) and the number of bases;
+            * ``s4pcs_samples``: points sampled on ``P`` (paper: 200); ``Q`` is sampled at the same
+              density, at most ``s4pcs_max_q`` of them (random subset);
+            * ``s4pcs_bases``: bases to try (None: enough to draw one all-inlier base with 99.9 %
+              probability, ``ceil(log(0.001) / log(1 - overlap^4))``);
+            * ``s4pcs_max_time``: wall-clock limit in seconds (None: no limit);
+            * ``s4pcs_normal_tol_deg``: normal-angle tolerance for pair filtering and set
+              verification (None: normals unused);
+            * ``s4pcs_stop_lcp``: stop as soon as a transform reaches this LCP;
+            * ``s4pcs_max_candidates``: congruent sets scored per base (random subset);
+            * ``s4pcs_max_pairs``: candidate pairs per base diagonal (random subset);
+            * ``s4pcs_pair_tol_factor``: pair-length and intermediate-point tolerance is
+              ``max(delta, factor x sample spacing)``;
+            * ``s4pcs_join_budget``: intermediate-point matches materialised per base (random
+              thinning of both pair sets; None: 20 x ``s4pcs_max_candidates``); bounds time and memory.
+        delta: registration accuracy in metres (pair length, intermediate point and LCP tolerance;
+            paper: 0.01). None: ``cfg.s4pcs_delta``. (The pipeline passes ``s4pcs_delta_rel`` x the
+            object diameter when that is set.)
         Q_verify, Qn_verify: denser target cloud for the LCP (default: ``Q``).
-        join_budget: at most this many intermediate-point matches are materialised per base (random
-            thinning of both pair sets; default ``20 * max_candidates``); bounds time and memory.
     Returns:
         :class:`Super4PCSResult` with ``T`` mapping ``P`` onto ``Q`` (identity and lcp 0 on failure).
     """
+    if cfg is None:
+        from .presets import PRESETS
+
+        cfg = PRESETS["default"]
+    overlap, n_samples, n_bases = cfg.s4pcs_overlap, cfg.s4pcs_samples, cfg.s4pcs_bases
+    max_time, normal_tol_deg, stop_lcp = cfg.s4pcs_max_time, cfg.s4pcs_normal_tol_deg, cfg.s4pcs_stop_lcp
+    max_candidates, max_pairs, pair_tol_factor = cfg.s4pcs_max_candidates, cfg.s4pcs_max_pairs, cfg.s4pcs_pair_tol_factor
+    max_q, join_budget, seed = cfg.s4pcs_max_q, cfg.s4pcs_join_budget, cfg.seed
+    delta = cfg.s4pcs_delta if delta is None else float(delta)
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     P = np.asarray(P, dtype=np.float64)
@@ -427,19 +427,6 @@ def super4pcs(
             best = (float(s_full[k]), R[top[k]], t[top[k]])
         if best[0] >= stop_lcp:
             break
-    if refine and best[0] > 0:
-        R, t = best[1], best[2]
-        for _ in range(2):
-            X = Ps @ R.T + t
-            dist, nn = tree.query(X, k=1, distance_upper_bound=delta)
-            ok = np.isfinite(dist)
-            if ok.sum() < 4:
-                break
-            dR, dt = kabsch_batch(X[ok], Qv[nn[ok]][None])
-            R, t = dR[0] @ R, dR[0] @ t + dt[0]
-        s_new = lcp(R[None], t[None], np.arange(len(Ps)))[0]
-        if s_new >= best[0] - 0.02:
-            best = (float(s_new), R, t)
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = best[1], best[2]
     return Super4PCSResult(T, best[0], tried, n_cong, n_ver, time.perf_counter() - t0)

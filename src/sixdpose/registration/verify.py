@@ -214,52 +214,51 @@ def _corr(fs: np.ndarray, fm: np.ndarray) -> np.ndarray:
 
 @dataclass
 class SearchResult:
-    """Output of :func:`colour_search`: ``T`` (4, 4) X_CO, ``geo``, ``col`` (sharp), ``changed``."""
+    """Output of :func:`colour_search`: ``X_CO`` (4, 4), ``geo``, ``col`` (sharp), ``changed``."""
 
-    T: np.ndarray
+    X_CO: np.ndarray
     geo: float
     col: float
     changed: bool
 
 
 def colour_search(
-    T0: np.ndarray,
+    X_CO: np.ndarray,
     points: np.ndarray,
     colors: np.ndarray,
     grid: ColourGrid,
     diameter: float,
-    n_rot: int = 2048,
-    n_points: int = 150,
-    n_points_fine: int = 600,
-    tol_rel: float = 0.02,
-    coarse_sigma_rel: float = 0.05,
-    geo_weight: float = 1.0,
-    smooth_rel: float = 0.1,
-    n_keep: int = 8,
-    nms_deg: float = 30.0,
-    n_refine: int = 4,
-    n_pert: int = 48,
-    refine_deg: float = 30.0,
-    min_gain: float = 0.0,
-    seed: int = 0,
-    debug: dict | None = None,
+    cfg: "RegistrationConfig | None" = None,
 ) -> SearchResult:
     """Search the rotations of the model about its centroid for the best colour agreement.
 
     Args:
-        T0: (4, 4) geometric pose X_CO. points, colors: (N, 3) masked scene points (camera frame, m)
-        and their colours in [0, 1]. grid: the object's :class:`ColourGrid`. diameter: metres.
-        n_rot: coarse rotations (uniform on SO(3)). n_points, n_points_fine: scene points used by
-        the coarse search and by the refinement.
-        tol_rel: surface tolerance (Gaussian sigma) / diameter of the fine surface term.
-        coarse_sigma_rel: the same for the coarse search. geo_weight: weight of the surface term
-        (in [0, 1]) against the colour correlation (in [-1, 1]). smooth_rel: colour smoothing radius
-        / diameter. n_keep: coarse candidates refined, at least ``nms_deg`` apart. n_refine, n_pert, refine_deg: refinement
-        rounds of ``n_pert`` perturbations of at most ``refine_deg`` (halved each round).
-        min_gain: the best candidate replaces ``T0`` only if it scores this much higher. seed.
+        X_CO: (4, 4) geometric pose (object in camera, metres). points, colors: (N, 3) masked scene
+            points (camera frame, m) and their colours in [0, 1]. grid: the object's
+            :class:`ColourGrid`. diameter: metres.
+        cfg: a :class:`~sixdpose.registration.presets.RegistrationConfig` (default: the ``default``
+            preset); its ``cv_*`` fields are the parameters and ``seed`` the random seed:
+            ``cv_rotations`` coarse rotations (uniform on SO(3)); ``cv_points`` / ``cv_points_fine``
+            scene points of the coarse search / the refinement; ``cv_tol_rel`` and
+            ``cv_coarse_sigma_rel`` surface tolerance (Gaussian sigma) / diameter of the fine and
+            coarse surface terms; ``cv_geo_weight`` weight of the surface term (in [0, 1]) against
+            the colour correlation (in [-1, 1]); ``cv_smooth_rel`` colour smoothing radius / diameter;
+            ``cv_keep`` coarse candidates refined, at least ``cv_nms_deg`` apart; ``cv_refine``
+            rounds of ``cv_perturbations`` perturbations of at most ``cv_refine_deg`` (halved each
+            round); ``cv_min_gain``: the best candidate replaces ``X_CO`` only if it scores this
+            much higher.
     Returns:
-        :class:`SearchResult` (``T0`` itself when nothing scores better).
+        :class:`SearchResult` (``X_CO`` itself when nothing scores better).
     """
+    if cfg is None:
+        from .presets import PRESETS
+
+        cfg = PRESETS["default"]
+    T0 = X_CO
+    n_rot, n_points, n_points_fine = cfg.cv_rotations, cfg.cv_points, cfg.cv_points_fine
+    tol_rel, coarse_sigma_rel, geo_weight = cfg.cv_tol_rel, cfg.cv_coarse_sigma_rel, cfg.cv_geo_weight
+    smooth_rel, n_keep, nms_deg, n_refine = cfg.cv_smooth_rel, cfg.cv_keep, cfg.cv_nms_deg, cfg.cv_refine
+    n_pert, refine_deg, min_gain, seed = cfg.cv_perturbations, cfg.cv_refine_deg, cfg.cv_min_gain, cfg.seed
     rng = np.random.default_rng(seed)
     P = np.asarray(points, dtype=np.float64)
     sel_f = rng.choice(len(P), size=min(len(P), n_points_fine), replace=False)
@@ -314,8 +313,6 @@ def colour_search(
             if len(kept) == n_keep:
                 break
     best = np.concatenate([np.eye(3)[None], S[kept]])
-    if debug is not None:
-        debug["coarse"] = best.copy()
     sigma = tol_rel * diameter
     sigma_c = coarse_sigma_rel * diameter
     # local refinement: the first rounds on smoothed colours (wide basin), the rest on sharp ones
@@ -338,8 +335,6 @@ def colour_search(
         ang /= 2.0
     if n_refine <= n_smooth:
         best_s, _, _ = score(best, False, sigma)
-    if debug is not None:
-        debug["refined"], debug["scores"] = best.copy(), best_s.copy()
     s0, g0, c0 = score(np.eye(3)[None], False, sigma)
     m = int(np.argmax(best_s))
     if best_s[m] <= s0[0] + min_gain:

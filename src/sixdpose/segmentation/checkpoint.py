@@ -13,6 +13,9 @@ dictionaries readable with ``torch.load(..., weights_only=True)``::
 
 from __future__ import annotations
 
+from ..errors import SixdposeError
+from ..fileio import atomic_path
+
 import os
 import random
 from pathlib import Path
@@ -26,23 +29,16 @@ LAST = "last.pt"
 FINAL = "model.pt"
 
 
-class CheckpointError(Exception):
+class CheckpointError(SixdposeError):
     """A checkpoint is missing, corrupt, or not compatible with this code or dataset."""
 
 
 def save_atomic(obj: dict, path: str | Path) -> None:
     """``torch.save`` to a temporary file in the same directory, flush to disk, then rename."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    try:
-        with open(tmp, "wb") as f:
-            torch.save(obj, f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        torch.save(obj, f)
+        f.flush()
+        os.fsync(f.fileno())
 
 
 def resolve(path: str | Path) -> Path:

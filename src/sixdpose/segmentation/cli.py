@@ -9,6 +9,8 @@ from __future__ import annotations
 import logging
 import sys
 
+from ..config import add_set_option, parse_overrides
+
 
 def _setup_logging(verbose: bool = False) -> None:
     """One-line messages on stderr for the ``sixdpose`` loggers (unless logging is configured)."""
@@ -21,30 +23,13 @@ def _setup_logging(verbose: bool = False) -> None:
     logger.setLevel(logging.INFO if verbose else logging.WARNING)
 
 
-def _user_errors(fn):
-    """Turn the stage's own exceptions into :class:`sixdpose.cli.UserError` (one line, exit 2)."""
-
-    def wrapper(args):
-        from ..cli import UserError
-        from .checkpoint import CheckpointError
-        from .train import TrainingError
-
-        try:
-            return fn(args)
-        except (CheckpointError, TrainingError, ValueError) as e:
-            raise UserError(str(e)) from None
-
-    return wrapper
-
-
-@_user_errors
 def _cmd_train(args) -> int:
     from .train import train
 
     _setup_logging(args.verbose)
-    overrides = {}
+    overrides = parse_overrides(args.overrides)
     for name in ("epochs", "batch_size", "lr", "seed", "num_workers", "max_steps_per_epoch", "val_fraction"):
-        v = getattr(args, name)
+        v = vars(args)[name]
         if v is not None:
             overrides[name] = v
     if args.threads is not None:
@@ -75,7 +60,6 @@ def _cmd_train(args) -> int:
     return 0
 
 
-@_user_errors
 def _cmd_segment(args) -> int:
     from .infer import segment
 
@@ -103,7 +87,6 @@ def _cmd_segment(args) -> int:
     return 0
 
 
-@_user_errors
 def _cmd_eval(args) -> int:
     from .evaluate import evaluate
 
@@ -145,6 +128,7 @@ def register(subparsers) -> None:
     p.add_argument("--no-amp", action="store_true", help="disable mixed precision on GPU")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("-v", "--verbose", action="store_true", help="log every skipped instance and epoch")
+    add_set_option(p)
     p.set_defaults(func=_train_entry)
 
     p = subparsers.add_parser(

@@ -24,14 +24,13 @@ inference, so a run always records exactly what trained it.
 
 from __future__ import annotations
 
-import dataclasses
-import json
-from dataclasses import asdict, dataclass, fields
-from pathlib import Path
+from dataclasses import dataclass
+
+from ..config import Config, from_profile
 
 
-@dataclass
-class SegConfig:
+@dataclass(frozen=True)
+class SegConfig(Config):
     """Every setting of a segmentation run (see the module docstring for the named profiles).
 
     Model:
@@ -117,12 +116,6 @@ class SegConfig:
     num_threads: int = 0
     log_every: int = 1
 
-    def __post_init__(self):
-        self.train_min_sizes = tuple(int(s) for s in self.train_min_sizes)
-        self.anchor_sizes = tuple(int(s) for s in self.anchor_sizes)
-        self.color_jitter = tuple(float(c) for c in self.color_jitter)
-        self.validate()
-
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first invalid field."""
         if self.backbone not in BACKBONES:
@@ -142,44 +135,6 @@ class SegConfig:
             raise ValueError("train_min_sizes: must not be empty")
         if len(self.color_jitter) != 4:
             raise ValueError("color_jitter: expected (brightness, contrast, saturation, hue)")
-
-    # -- (de)serialisation ------------------------------------------------------------------
-    def to_dict(self) -> dict:
-        """The config as a JSON-compatible dict."""
-        d = asdict(self)
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "SegConfig":
-        """Build a config from :meth:`to_dict` output; unknown keys raise ``ValueError``."""
-        names = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - names)
-        if unknown:
-            raise ValueError(f"unknown config field(s): {', '.join(unknown)}")
-        return cls(**d)
-
-    def save(self, path: str | Path) -> None:
-        """Write the config as JSON (atomically)."""
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(json.dumps(self.to_dict(), indent=2) + "\n")
-        tmp.replace(path)
-
-    @classmethod
-    def load(cls, path: str | Path) -> "SegConfig":
-        """Read a config written by :meth:`save`; raise ``ValueError`` if it is malformed."""
-        path = Path(path)
-        try:
-            d = json.loads(path.read_text())
-        except json.JSONDecodeError as e:
-            raise ValueError(f"{path}: corrupt config ({e})") from None
-        if not isinstance(d, dict):
-            raise ValueError(f"{path}: expected a JSON object")
-        return cls.from_dict(d)
-
-    def replace(self, **changes) -> "SegConfig":
-        """A copy with ``changes`` applied (validated)."""
-        return dataclasses.replace(self, **changes)
 
 
 #: Backbones the model builder knows (torchvision ResNets; the feature pyramid is built on top).
@@ -221,10 +176,9 @@ PROFILES: dict[str, SegConfig] = {
 
 
 def profile_config(name: str, **overrides) -> SegConfig:
-    """The config of profile ``name`` with ``overrides`` applied; ``ValueError`` if unknown."""
-    if name not in PROFILES:
-        raise ValueError(f"unknown profile {name!r} (known: {', '.join(PROFILES)})")
-    return PROFILES[name].replace(**overrides)
+    """The config of profile ``name`` with ``overrides`` applied; raises
+    :class:`~sixdpose.errors.ConfigError` for an unknown profile, field or value."""
+    return from_profile(PROFILES, name, overrides)
 
 
 __all__ = ["BACKBONES", "PROFILES", "SegConfig", "profile_config"]

@@ -393,11 +393,3 @@ class TrainView(torch.utils.data.Dataset):
 def collate(batch):
     """Keep images and targets as lists (images may differ in size)."""
     return [b[0] for b in batch], [b[1] for b in batch]
-
-
-def write_json(path: Path, obj) -> None:
-    """Write ``obj`` as JSON atomically (temp file + rename)."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(obj, indent=1) + "\n")
-    tmp.replace(path)

@@ -26,7 +26,8 @@ import numpy as np
 
 from ..datasets.base import DatasetError, open_dataset
 from .data import ClassMap
-from .infer import coco_image_id, encode_rle, load_prediction
+from ..artifacts.predictions import read_predictions
+from .infer import coco_image_id, encode_rle
 
 log = logging.getLogger("sixdpose.segmentation")
 
@@ -199,8 +200,8 @@ def evaluate(data: str | Path, pred_dir: str | Path, out_dir: str | Path | None 
     else:  # rebuild from the npz files
         results = []
         for s, i in wanted:
-            p = load_prediction(pred_dir, s, i)
-            for m, lab, sc in zip(p["masks"], p["labels"], p["scores"]):
+            for d in read_predictions(pred_dir, s, i):
+                m, lab, sc = d.mask, d.obj_id, d.score
                 ys, xs = np.flatnonzero(m.any(1)), np.flatnonzero(m.any(0))
                 bbox = [float(xs[0]), float(ys[0]), float(xs[-1] + 1 - xs[0]), float(ys[-1] + 1 - ys[0])] if xs.size else [0.0] * 4
                 results.append({"image_id": coco_image_id(s, i), "category_id": int(lab),

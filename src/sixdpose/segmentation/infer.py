@@ -1,8 +1,9 @@
 """Inference: a trained run -> per-image instance masks (the format the registration stage reads).
 
-Output of ``sixdpose segment --data DIR --ckpt RUN_DIR --out PRED_DIR`` (see the package docstring for
-the file format): ``PRED_DIR/<scene_id>_<im_id>.npz`` per image, ``PRED_DIR/coco_results.json`` and
-``PRED_DIR/meta.json`` (checkpoint, classes, images, score threshold).
+Output of ``sixdpose segment --data DIR --ckpt RUN_DIR --out PRED_DIR``: the predicted-masks artifact
+(:mod:`sixdpose.artifacts.predictions`, its one writer and reader): ``PRED_DIR/<scene_id>_<im_id>.npz``
+per image, ``PRED_DIR/coco_results.json`` and ``PRED_DIR/meta.json`` (checkpoint, classes, images,
+score threshold).
 """
 
 from __future__ import annotations
@@ -16,39 +17,17 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..datasets.base import DatasetError, open_dataset
+from ..artifacts.predictions import write_predictions, write_predictions_meta
+from ..datasets.base import DatasetError, as_reader
+from ..errors import ConfigError
+from ..fileio import atomic_write_json, claim_output_dir
 from . import checkpoint as ck
 from .config import SegConfig
-from .data import ClassMap, open_part, write_json
+from .data import ClassMap, open_part
 from .model import build_model, set_train_sizes
 from .train import pick_device
 
 log = logging.getLogger("sixdpose.segmentation")
-
-
-def pred_path(pred_dir: str | Path, scene_id: int, im_id: int) -> Path:
-    """Path of the prediction file of one image: ``PRED_DIR/<scene_id>_<im_id>.npz`` (plain integers)."""
-    return Path(pred_dir) / f"{int(scene_id)}_{int(im_id)}.npz"
-
-
-def load_prediction(pred_dir: str | Path, scene_id: int, im_id: int) -> dict[str, np.ndarray]:
-    """Read one prediction file; returns ``masks`` (N,H,W) bool, ``labels`` (N,) int32 obj ids, ``scores``.
-
-    Raises:
-        DatasetError: the file is missing or malformed.
-    """
-    path = pred_path(pred_dir, scene_id, im_id)
-    if not path.is_file():
-        raise DatasetError(f"{path}: no prediction for scene {scene_id} image {im_id}")
-    try:
-        with np.load(path) as z:
-            out = {k: z[k] for k in ("masks", "labels", "scores")}
-    except Exception as e:  # noqa: BLE001
-        raise DatasetError(f"{path}: unreadable prediction file ({e})") from None
-    n = len(out["labels"])
-    if out["masks"].ndim != 3 or out["masks"].shape[0] != n or out["scores"].shape != (n,):
-        raise DatasetError(f"{path}: inconsistent arrays {[(k, v.shape) for k, v in out.items()]}")
-    return out
 
 
 def coco_image_id(scene_id: int, im_id: int) -> int:
@@ -126,12 +105,6 @@ class Segmenter:
         return res
 
 
-def _write_npz(path: Path, pred: dict) -> None:
-    tmp = path.with_name(path.name[:-4] + ".tmp.npz")
-    np.savez_compressed(tmp, masks=pred["masks"], labels=pred["labels"], scores=pred["scores"])
-    tmp.replace(path)
-
-
 class _Images(torch.utils.data.Dataset):
     def __init__(self, ds, indices):
         self.ds, self.indices = ds, indices
@@ -149,7 +122,7 @@ def _transpose(batch):
 
 
 def segment(
-    data: str | Path,
+    data,
     ckpt: str | Path,
     out: str | Path,
     *,
@@ -164,9 +137,10 @@ def segment(
     """Segment every image of a dataset (or of the run's train/test subset) and write ``out``.
 
     Args:
-        data: dataset directory.
+        data: a :class:`~sixdpose.datasets.base.DatasetReader` or a dataset directory.
         ckpt: run directory or checkpoint file.
-        out: prediction directory (created; existing prediction files are overwritten).
+        out: prediction directory (created; one written by ``segment`` before is overwritten; any
+            other non-empty directory is refused).
         split: BOP split to read (ignored for the synthetic layout) when ``subset == "all"``.
         subset: ``all`` images of ``data``/``split``, or the run's ``train`` / ``test`` images
             (needs ``ckpt`` to be a run directory with ``split.json``).
@@ -182,7 +156,7 @@ def segment(
     """
     seg = Segmenter(ckpt, device=device, score_thresh=score_thresh)
     if subset == "all":
-        ds = open_dataset(data, split=split)
+        ds = as_reader(data, split=split)
         indices = list(range(len(ds)))
         reader_split = split
     elif subset in ("train", "test"):
@@ -193,13 +167,13 @@ def segment(
         ds, indices = open_part(data, record, subset)
         reader_split = record[subset]["split"]
     else:
-        raise ValueError(f"subset must be all, train or test, not {subset!r}")
+        raise ConfigError(f"subset must be all, train or test, not {subset!r}")
     seg.classes.check_compatible(ds)
     missing = sorted(set(int(k) for k in ds.object_ids) - set(seg.classes.obj_ids))
     if missing:
         log.warning("objects of the dataset the checkpoint was not trained on (never predicted): %s", missing)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    claim_output_dir(out, "segment")
     loader = torch.utils.data.DataLoader(
         _Images(ds, indices), batch_size=batch_size, num_workers=num_workers, collate_fn=_transpose
     )
@@ -215,7 +189,7 @@ def segment(
         preds = seg.predict(list(rgbs))
         t_model += time.perf_counter() - t0
         for s, i, rgb, p in zip(scene_ids, im_ids, rgbs, preds):
-            _write_npz(pred_path(out, s, i), p)
+            write_predictions(out, s, i, p["masks"], p["labels"], p["scores"], p["boxes"])
             images.append([int(s), int(i), int(rgb.shape[0]), int(rgb.shape[1])])
             n_det += len(p["labels"])
             for m, lab, sc, bx in zip(p["masks"], p["labels"], p["scores"], p["boxes"]):
@@ -230,19 +204,20 @@ def segment(
             bar.update(len(rgbs))
     if bar is not None:
         bar.close()
-    write_json(out / "coco_results.json", results)
+    atomic_write_json(out / "coco_results.json", results)
     meta = {
         "checkpoint": str(seg.path.resolve()),
         "epoch": seg.epoch,
         "classes": seg.classes.to_list(),
         "score_thresh": seg.cfg.score_thresh,
-        "data": str(Path(data).resolve()),
+        "data": str(Path(ds.location).resolve()),
         "split": reader_split,  # reader split (BOP split directory; ignored by the synthetic layout)
         "subset": subset,
         "images": images,
-        "format": "npz per image: masks (N,H,W) bool, labels (N,) int32 obj_id, scores (N,) float32",
+        "format": "sixdpose.artifacts.predictions: npz per image, masks (N,H,W) bool, labels (N,) int32 obj_id, "
+                  "scores (N,) float32, boxes (N,4) float32",
     }
-    write_json(out / "meta.json", meta)
+    write_predictions_meta(out, meta)
     return {
         "images": len(images),
         "detections": n_det,

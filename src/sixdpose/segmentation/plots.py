@@ -75,7 +75,7 @@ def plot_predictions(data, pred_dir: str | Path, n: int = 3, score_thresh: float
     import matplotlib.pyplot as plt
 
     from .evaluate import open_segmented
-    from .infer import load_prediction
+    from ..artifacts.predictions import read_predictions
 
     pred_dir = Path(pred_dir)
     ds, meta, index = open_segmented(data, pred_dir)
@@ -93,13 +93,12 @@ def plot_predictions(data, pred_dir: str | Path, n: int = 3, score_thresh: float
         s = ds[index[key]]
         gt_masks = [i.mask for i in s.instances if i.mask is not None and i.obj_id in colors]
         gt_labels = [i.obj_id for i in s.instances if i.mask is not None and i.obj_id in colors]
-        p = load_prediction(pred_dir, *key)
-        keep = p["scores"] >= score_thresh
+        dets = [d for d in read_predictions(pred_dir, *key) if d.score >= score_thresh]
         row[0].imshow(_overlay(s.rgb, gt_masks, gt_labels, colors))
         row[0].set_title(f"ground truth: scene {key[0]} image {key[1]} ({len(gt_masks)})", fontsize=8)
-        row[1].imshow(_overlay(s.rgb, p["masks"][keep], p["labels"][keep], colors))
-        shown = sorted({names.get(int(l), str(l)) for l in p["labels"][keep]})
-        row[1].set_title(f"predicted, score >= {score_thresh} ({int(keep.sum())})", fontsize=8)
+        row[1].imshow(_overlay(s.rgb, [d.mask for d in dets], [d.obj_id for d in dets], colors))
+        shown = sorted({names.get(d.obj_id, str(d.obj_id)) for d in dets})
+        row[1].set_title(f"predicted, score >= {score_thresh} ({len(dets)})", fontsize=8)
         row[1].set_xlabel(", ".join(shown)[:90], fontsize=7)
         for a in row:
             a.set_xticks([])

@@ -8,12 +8,12 @@ the normal reader. Poses are dummies (identity rotation, 1 m in front of the cam
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from ..constants import TARGET_OBJECTS
+from ..datasets.layout import write_dataset
 
 _COLORS = [(220, 40, 40), (40, 200, 60), (50, 80, 230), (230, 200, 30), (200, 50, 200), (30, 200, 210)]
 
@@ -55,19 +55,13 @@ def make_toy_dataset(
     Returns:
         ``root`` as a Path.
     """
-    from PIL import Image
-    import yaml
-
     if not 1 <= n_classes <= len(_COLORS):
         raise ValueError(f"n_classes must be in 1..{len(_COLORS)}")
-    root = Path(root)
-    for d in ("RGB", "depth", "masks", "models"):
-        (root / d).mkdir(parents=True, exist_ok=True)
     H, W = size
     rng = np.random.default_rng(seed)
     names = list(TARGET_OBJECTS[:n_classes])
     K = [[600.0, 0.0, (W - 1) / 2], [0.0, 600.0, (H - 1) / 2], [0.0, 0.0, 1.0]]
-    gt = {}
+    images = []
     im = 0
     for scene in range(n_scenes):
         for _ in range(views):
@@ -90,25 +84,9 @@ def make_toy_dataset(
             for c, k, m in reversed(drawn):  # later shapes occlude earlier ones
                 vis = m & ~occupied
                 occupied |= m
-                name = names[c]
-                (root / "masks" / name).mkdir(exist_ok=True)
-                Image.fromarray((vis * 255).astype(np.uint8)).save(root / "masks" / name / f"{im}_{k}.png")
-                objs.append({
-                    "obj_name": name,
-                    "obj_id": c + 1,
-                    "inst": k,
-                    "R": np.eye(3).tolist(),
-                    "t": [0.0, 0.0, 1.0],
-                    "px_visib": int(vis.sum()),
-                })
-            Image.fromarray(rgb).save(root / "RGB" / f"{im}.png")
-            np.save(root / "depth" / f"{im}.npy", np.ones((H, W), np.float32))
-            gt[im] = {"scene_id": scene, "cam_K": K, "objects": objs}
+                objs.append({"obj_name": names[c], "obj_id": c + 1, "inst": k, "R": np.eye(3), "t": [0.0, 0.0, 1.0], "mask": vis})
+            images.append({"im_id": im, "scene_id": scene, "K": K, "rgb": rgb, "depth": np.ones((H, W), np.float32),
+                           "instances": objs})
             im += 1
-    with open(root / "gt.yml", "w") as f:
-        yaml.safe_dump(gt, f)
-    info = {n: {"obj_id": i + 1, "diameter": 0.1, "symmetric": False} for i, n in enumerate(names)}
-    with open(root / "models" / "models_info.yml", "w") as f:
-        yaml.safe_dump(info, f)
-    (root / "manifest.json").write_text(json.dumps({"generator": "sixdpose.segmentation.toydata", "seed": seed}))
-    return root
+    models = {n: {"obj_id": i + 1, "diameter": 0.1, "symmetric": False} for i, n in enumerate(names)}
+    return write_dataset(root, images, models, {"generator": "sixdpose.segmentation.toydata", "seed": seed})

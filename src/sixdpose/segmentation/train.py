@@ -19,6 +19,9 @@ its shard (``DistributedSampler``) with ``DistributedDataParallel`` (NCCL on GPU
 
 from __future__ import annotations
 
+from ..errors import SixdposeError
+from ..fileio import atomic_path, atomic_write_json, claim_output_dir
+
 import csv
 import json
 import logging
@@ -36,7 +39,7 @@ import torch.distributed as dist
 from ..datasets.base import DatasetError
 from . import checkpoint as ck
 from .config import SegConfig, profile_config
-from .data import ClassMap, ScanResult, TrainView, collate, make_split, open_part, scan, write_json
+from .data import ClassMap, ScanResult, TrainView, collate, make_split, open_part, scan
 from .model import build_model, set_train_sizes
 
 log = logging.getLogger("sixdpose.segmentation")
@@ -45,7 +48,7 @@ LOSS_KEYS = ("loss_classifier", "loss_box_reg", "loss_mask", "loss_objectness", 
 CSV_FIELDS = ("epoch", "step", "lr", "loss") + LOSS_KEYS + ("seconds",)
 
 
-class TrainingError(Exception):
+class TrainingError(SixdposeError):
     """Training cannot start or continue (bad run directory, diverged loss, ...)."""
 
 
@@ -74,10 +77,7 @@ def _prepare_run_dir(run_dir: Path, resume: bool, cfg: SegConfig | None, profile
     if resume:
         if not cfg_path.is_file():
             raise TrainingError(f"{run_dir}: nothing to resume (no config.json); start a new run without --resume")
-        try:
-            saved = SegConfig.load(cfg_path)
-        except ValueError as e:
-            raise TrainingError(f"{cfg_path}: {e}") from None
+        saved = SegConfig.load(cfg_path)
         if cfg is not None and cfg.replace(epochs=saved.epochs, num_threads=saved.num_threads,
                                            num_workers=saved.num_workers) != saved:
             raise TrainingError(f"{run_dir}: the given config differs from the saved one; resume uses the saved config")
@@ -90,6 +90,7 @@ def _prepare_run_dir(run_dir: Path, resume: bool, cfg: SegConfig | None, profile
         return saved.replace(**{k: v for k, v in overrides.items() if k in allowed})
     if (run_dir / ck.LAST).exists() or (run_dir / ck.FINAL).exists() or cfg_path.exists():
         raise TrainingError(f"{run_dir}: already holds a run; use --resume to continue it or choose another --out")
+    claim_output_dir(run_dir, "train-seg")
     if cfg is None:
         cfg = profile_config(profile or "smoke")
     return cfg.replace(**overrides) if overrides else cfg
@@ -110,12 +111,10 @@ def _truncate_csv(path: Path, from_epoch: int) -> None:
         return
     with open(path, newline="") as f:
         rows = [r for r in csv.DictReader(f) if int(r["epoch"]) < from_epoch]
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="") as f:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
         w.writeheader()
         w.writerows(rows)
-    tmp.replace(path)
 
 
 def train(
@@ -203,10 +202,10 @@ def _train(data, run_dir, profile, cfg, resume, dev, progress, overrides, world,
                 split["classes"] = classes.to_list()
                 split["data"] = str(data.resolve())
                 cfg_final.save(run_dir / "config.json")
-                write_json(split_path, split)
+                atomic_write_json(split_path, split)
                 manifest = getattr(ds, "manifest", None)
                 if manifest:
-                    write_json(run_dir / "manifest.json", manifest)
+                    atomic_write_json(run_dir / "manifest.json", manifest)
             elif resume:
                 cfg_final.save(run_dir / "config.json")  # possibly extended epochs
         except Exception as e:  # noqa: BLE001 - re-raised on every rank
@@ -262,7 +261,7 @@ def _train(data, run_dir, profile, cfg, resume, dev, progress, overrides, world,
             log.warning("resuming %s at epoch %d of %d", run_dir, start_epoch + 1, cfg.epochs)
     if rank == 0:
         _truncate_csv(run_dir / "metrics.csv", start_epoch)
-        write_json(run_dir / "run.json", {
+        atomic_write_json(run_dir / "run.json", {
             "classes": classes.to_list(),
             "init": init,
             "world_size": world,
