@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .base import DatasetError, Instance, ObjectModel, Sample, read_image
+from .ply import read_ply, vertex_normals
 
 log = logging.getLogger(__name__)
 
@@ -230,36 +231,27 @@ class BopDataset:
     def model(self, obj_id: int) -> ObjectModel:
         """Reference model of ``obj_id`` (vertices in metres, normals, colours), cached.
 
-        Normals are the PLY's vertex normals, else computed from the mesh faces.
+        Read by :func:`sixdpose.datasets.ply.read_ply`: colours come from the vertex colours or, for
+        textured BOP models, from the texture sampled at each vertex's uv (a missing texture is one
+        warning and a model without colours). Normals are the PLY's vertex normals, else computed
+        from the mesh faces.
         """
-        import open3d as o3d
-
         obj_id = int(obj_id)
         if obj_id in self._models:
             return self._models[obj_id]
         if obj_id not in self.models_info:
             raise DatasetError(f"{self.models_path / 'models_info.json'}: no object with obj_id {obj_id}")
-        path = self._model_path(obj_id)
-        if not path.is_file():
-            raise DatasetError(f"{path}: model file not found")
-        mesh = o3d.io.read_triangle_mesh(str(path))
-        if len(mesh.vertices) == 0:
-            raise DatasetError(f"{path}: no vertices could be read")
-        pts = np.asarray(mesh.vertices, dtype=np.float64) / 1000.0
-        tris = np.asarray(mesh.triangles, dtype=np.int64)
-        if mesh.has_vertex_normals():
-            nrm = np.asarray(mesh.vertex_normals, dtype=np.float64)
-        elif len(tris):
-            mesh.compute_vertex_normals()
-            nrm = np.asarray(mesh.vertex_normals, dtype=np.float64)
-        else:
-            nrm = None
+        ply = read_ply(self._model_path(obj_id))
+        pts = ply.vertices / 1000.0
+        tris = ply.faces if ply.faces is not None else np.zeros((0, 3), np.int64)
+        nrm = ply.normals
+        if nrm is None and len(tris):
+            nrm = vertex_normals(pts, tris)
         if nrm is not None:
             nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
-        col = np.asarray(mesh.vertex_colors, dtype=np.float64) if mesh.has_vertex_colors() else None
         info = self.models_info[obj_id]
         m = ObjectModel(
-            self.object_ids[obj_id], obj_id, pts, nrm, col, float(info["diameter"]) / 1000.0, self.is_symmetric(obj_id),
+            self.object_ids[obj_id], obj_id, pts, nrm, ply.colors, float(info["diameter"]) / 1000.0, self.is_symmetric(obj_id),
             mesh=(pts, tris) if len(tris) else None,
         )
         self._models[obj_id] = m

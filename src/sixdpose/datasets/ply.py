@@ -20,14 +20,13 @@ Units are those of the file (BOP: millimetres); callers convert to metres.
 
 from __future__ import annotations
 
-import os
-import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from ..fileio import atomic_write_bytes
 from .base import DatasetError
 
 __all__ = ["PlyData", "read_ply", "write_ply", "sample_texture"]
@@ -474,7 +473,7 @@ def _load_texture(texture_file: Path, ply_path: Path) -> np.ndarray | None:
 # ------------------------------------------------------------------------------------------
 # writer
 # ------------------------------------------------------------------------------------------
-def write_ply(path: str | Path, points, normals=None, colors=None, faces=None) -> Path:
+def write_ply(path: str | Path, points, normals=None, colors=None, faces=None, comment: str = "written by sixdpose") -> Path:
     """Write a binary little-endian PLY (point cloud or triangle mesh), atomically.
 
     Layout: ``x y z`` float32, optional ``nx ny nz`` float32, optional ``red green blue`` uchar,
@@ -489,6 +488,7 @@ def write_ply(path: str | Path, points, normals=None, colors=None, faces=None) -
         normals: optional (N, 3) normals.
         colors: optional (N, 3) colours: float in [0, 1] (rounded to uchar, clipped) or uint8.
         faces: optional (F, 3) integer triangle indices in [0, N).
+        comment: the header's ``comment`` line.
     Returns:
         The written path.
     Raises:
@@ -523,7 +523,7 @@ def write_ply(path: str | Path, points, normals=None, colors=None, faces=None) -
     if colors is not None:
         arr["red"], arr["green"], arr["blue"] = c8.T
     types = {"<f4": "float", "u1": "uchar"}
-    header = ["ply", "format binary_little_endian 1.0", "comment written by sixdpose", f"element vertex {n}"]
+    header = ["ply", "format binary_little_endian 1.0", f"comment {comment}", f"element vertex {n}"]
     header += [f"property {types[t]} {name}" for name, t in fields]
     fbytes = b""
     if faces is not None:
@@ -538,18 +538,20 @@ def write_ply(path: str | Path, points, normals=None, colors=None, faces=None) -
         header += [f"element face {len(f)}", "property list uchar int vertex_indices"]
         fbytes = farr.tobytes()
     header += ["end_header"]
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(("\n".join(header) + "\n").encode("ascii"))
-            fh.write(arr.tobytes())
-            fh.write(fbytes)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    atomic_write_bytes(path, ("\n".join(header) + "\n").encode("ascii") + arr.tobytes() + fbytes)
     return path
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals (N, 3), unit length (zero for vertices on no face).
+
+    Args:
+        vertices: (N, 3) positions. faces: (F, 3) triangle indices (counter-clockwise = outward).
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # length = 2 x area
+    n = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(n, f[:, k], fn)
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
