@@ -29,7 +29,7 @@ class PerturbedColours:
     def __init__(self, ds):
         self._ds = ds
         self._index = {k: i for i, k in enumerate(ds.keys())}
-        self.location, self.has_depth, self.has_masks = ds.location, ds.has_depth, ds.has_masks
+        self.location, self.has_depth, self.has_masks, self.manifest = ds.location, ds.has_depth, ds.has_masks, ds.manifest
 
     def __len__(self):
         return len(self._ds)

@@ -82,7 +82,7 @@ def _check_writable(path: Path) -> None:
 
 
 def claim_output_dir(path: str | os.PathLike, kind: str, marker: str | tuple[str, ...] = (),
-                     write_marker: bool = True) -> bool:
+                     write_marker: bool = True, create: bool = True) -> bool:
     """Check that ``path`` may receive the output of command ``kind`` and create it.
 
     Accepted: a path that does not exist, an empty directory, or a directory written by ``kind`` before:
@@ -94,6 +94,7 @@ def claim_output_dir(path: str | os.PathLike, kind: str, marker: str | tuple[str
         path: output directory. kind: the command, e.g. ``"export-bop"``.
         marker: file name(s), relative to ``path``, whose presence marks the directory as ours.
         write_marker: write :data:`MARKER` into a directory that lacks it.
+        create: create the directory (and marker); False only checks (call it before slow work).
     Returns:
         True if ``path`` already held output of ``kind`` (the caller resumes or rewrites it).
     Raises:
@@ -118,6 +119,8 @@ def claim_output_dir(path: str | os.PathLike, kind: str, marker: str | tuple[str
                 "choose a new or empty output directory (nothing was written)"
             )
     _check_writable(path)
+    if not create:
+        return ours
     path.mkdir(parents=True, exist_ok=True)
     if write_marker and not (path / MARKER).exists():
         atomic_write_json(path / MARKER, {"kind": kind})

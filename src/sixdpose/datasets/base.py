@@ -106,11 +106,13 @@ class DatasetReader(Protocol):
         location: the directory that holds the images (synthetic: the dataset root; BOP: the split
             folder), for messages.
         has_depth: every image has a depth map. has_masks: every instance has a visible mask.
+        manifest: how the data was made (the generator's ``manifest.json``), ``{}`` if unknown.
     """
 
     location: Path
     has_depth: bool
     has_masks: bool
+    manifest: dict
 
     def __len__(self) -> int:
         """Number of images."""

@@ -98,6 +98,7 @@ class BopDataset:
             raise DatasetError(f"{split_dir}: split {split!r} not found (available: {', '.join(avail) or 'none'})")
         self.split_dir = split_dir
         self.location = split_dir
+        self.manifest: dict = {}
         dirs = sorted(p for p in split_dir.iterdir() if p.is_dir() and p.name.isdigit())
         if scene_ids is not None:
             wanted = {int(s) for s in scene_ids}

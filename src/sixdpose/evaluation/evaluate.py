@@ -36,6 +36,26 @@ class EvaluationError(SixdposeError):
 
 
 @dataclass
+class MatchRecord:
+    """The outcome for one counted GT instance.
+
+    Attributes:
+        scene_id, im_id, obj_id: the instance's image and object. gt_index: its index in
+        ``Sample.instances``. error: ADD(-S) (metres) of its matched estimate, else of the nearest
+        estimate of its object in the image, else nan. correct: matched within the threshold.
+        estimate: the matched (or nearest) :class:`~sixdpose.artifacts.poses.PoseEstimate`, or None.
+    """
+
+    scene_id: int
+    im_id: int
+    obj_id: int
+    gt_index: int
+    error: float
+    correct: bool
+    estimate: PoseEstimate | None = None
+
+
+@dataclass
 class EvalResult:
     """Outcome of :func:`evaluate`.
 
@@ -43,8 +63,7 @@ class EvalResult:
         per_object: obj_id -> dict(name, n_gt, n_correct, accuracy (%)).
         accuracy: % over all counted GT instances. mean_object_accuracy: mean of per-object %.
         n_gt, n_correct: counts. fps, instances_per_s, n_images, n_estimates, total_time: timing.
-        records: per counted GT instance: (scene_id, im_id, obj_id, index in ``Sample.instances``,
-            ADD(-S) error (m) of its match or of the nearest estimate, or nan, correct).
+        records: one :class:`MatchRecord` per counted GT instance.
     """
 
     per_object: dict
@@ -117,15 +136,18 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
             model = dataset.model(oid)
             err = np.array([[metrics.add_or_adds(e.R, e.t, g.R, g.t, model.points, model.symmetric) for g in g_o] for e in e_o]).reshape(len(e_o), len(g_o))
             matched = np.full(len(g_o), np.nan)
+            match_est: list[int | None] = [None] * len(g_o)
             for i in range(len(e_o)):
                 cand = [(err[i, j], j) for j in range(len(g_o)) if math.isnan(matched[j]) and err[i, j] < threshold * model.diameter]
                 if cand:
                     e_min, j = min(cand)
-                    matched[j] = e_min
+                    matched[j], match_est[j] = e_min, i
             for j, g in enumerate(g_o):
                 ok = not math.isnan(matched[j])
-                best = matched[j] if ok else (float(err[:, j].min()) if len(e_o) else math.nan)
-                records.append((key[0], key[1], oid, sample.instances.index(g), best, ok))
+                i = match_est[j] if ok else (int(np.argmin(err[:, j])) if len(e_o) else None)
+                best = matched[j] if ok else (float(err[i, j]) if i is not None else math.nan)
+                records.append(MatchRecord(key[0], key[1], oid, sample.instances.index(g), float(best), ok,
+                                           None if i is None else e_o[i]))
                 n_gt_obj[oid] += 1
                 n_ok_obj[oid] += int(ok)
     per_object = {

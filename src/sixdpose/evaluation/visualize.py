@@ -23,3 +23,40 @@ def draw_pose(ax, rgb: np.ndarray, K: np.ndarray, points: np.ndarray, poses, tit
     ax.set_ylim(rgb.shape[0], 0)
     ax.set_title(title, fontsize=8)
     ax.axis("off")
+
+
+def plot_cases(reader, result, n_good: int = 3, n_bad: int = 3, ncols: int = 3, title: str = "", max_points: int = 1500):
+    """A grid of good and failed cases of an evaluation: GT (green) and estimate (red) model points
+    projected over the image (the paper's Fig. 7 style).
+
+    Args:
+        reader: the :class:`~sixdpose.datasets.base.DatasetReader` that was evaluated.
+        result: its :class:`~sixdpose.evaluation.evaluate.EvalResult` (``records`` carry the estimates).
+        n_good, n_bad: cases of each kind (the first ones in image order). ncols: grid columns.
+    Returns:
+        the matplotlib ``Figure`` (``ceil((n_good + n_bad) / ncols)`` rows).
+    """
+    import math
+
+    import matplotlib.pyplot as plt
+
+    cases = [r for r in result.records if r.correct][:n_good] + [r for r in result.records if not r.correct][:n_bad]
+    n = max(len(cases), 1)
+    ncols = min(ncols, n)
+    nrows = math.ceil(n / ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(3.4 * ncols, 2.8 * nrows), squeeze=False)
+    for ax in axes.flat:
+        ax.axis("off")
+    for ax, r in zip(axes.flat, cases):
+        s = reader.load((r.scene_id, r.im_id), masks=False, depth=False)
+        g, model = s.instances[r.gt_index], reader.model(r.obj_id)
+        poses = [(g.R, g.t, "lime", "GT")]
+        if r.estimate is not None:
+            poses.append((r.estimate.R, r.estimate.t, "red", "estimate"))
+        err = "no estimate" if r.estimate is None else f"err {r.error * 1000:.1f} mm"
+        draw_pose(ax, s.rgb, s.K, model.points, poses, f"{'ok' if r.correct else 'fail'}: {model.obj_name} ({err})",
+                  max_points=max_points)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return fig

@@ -60,7 +60,7 @@ class ClassMap:
         """All objects of ``ds.object_ids`` (the dataset's target objects), sorted by id."""
         ids = ds.object_ids
         if not ids:
-            raise DatasetError(f"{getattr(ds, 'root', ds)}: the dataset declares no objects")
+            raise DatasetError(f"{ds.location}: the dataset declares no objects")
         keys = sorted(int(k) for k in ids)
         return cls(keys, [str(ids[k]) for k in keys])
 

@@ -154,6 +154,7 @@ def segment(
     Raises:
         CheckpointError, DatasetError (incl. a checkpoint trained on other objects than the dataset's).
     """
+    claim_output_dir(out, "segment", create=False)  # refuse a foreign directory before loading anything
     seg = Segmenter(ckpt, device=device, score_thresh=score_thresh)
     if subset == "all":
         ds = as_reader(data, split=split)

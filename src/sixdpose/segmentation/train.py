@@ -203,9 +203,8 @@ def _train(data, run_dir, profile, cfg, resume, dev, progress, overrides, world,
                 split["data"] = str(data.resolve())
                 cfg_final.save(run_dir / "config.json")
                 atomic_write_json(split_path, split)
-                manifest = getattr(ds, "manifest", None)
-                if manifest:
-                    atomic_write_json(run_dir / "manifest.json", manifest)
+                if ds.manifest:
+                    atomic_write_json(run_dir / "manifest.json", ds.manifest)
             elif resume:
                 cfg_final.save(run_dir / "config.json")  # possibly extended epochs
         except Exception as e:  # noqa: BLE001 - re-raised on every rank

@@ -1,0 +1,80 @@
+"""Run several pose methods over the same images and tabulate them (the experiment loop of the paper's
+Tables II and III; notebooks call this, they hold no loop of their own).
+
+A *method* is a name and a function ``run(reader, masks, indices) -> list[PoseEstimate]``;
+:func:`hybrid_methods` builds the six hybrid ones (RANSAC / FGR / Super4PCS, each with and without ICP).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+from ..artifacts.poses import PoseEstimate
+from ..datasets.base import DatasetReader, as_reader
+from .evaluate import EvalResult, evaluate
+
+#: The display name of each hybrid method (paper Tables I-III: "Ours Hybrid(RANSAC + ICP)" ...).
+HYBRID_NAMES = {"ransac": "RANSAC", "fgr": "FGR", "super4pcs": "Super4PCS"}
+
+
+@dataclass
+class Run:
+    """One method on one mask source: its rows and their evaluation."""
+
+    method: str
+    masks: str
+    estimates: list[PoseEstimate]
+    result: EvalResult
+
+
+def hybrid_methods(cfg=None, workers: int = 2, methods=("ransac", "fgr", "super4pcs"), icp=(False, True)) -> dict[str, Callable]:
+    """The hybrid methods as ``{display name: run(reader, masks, indices)}``.
+
+    Args:
+        cfg: a :class:`~sixdpose.registration.presets.RegistrationConfig` (default preset if None).
+        workers: registration processes. methods, icp: which combinations.
+    """
+    from ..registration.runner import run_registration
+
+    out = {}
+    for m in methods:
+        for use_icp in icp:
+            def run(reader, masks, indices, m=m, use_icp=use_icp):
+                return run_registration(reader, m, icp=use_icp, masks=masks, cfg=cfg, workers=workers, indices=indices,
+                                        min_px=400 if masks == "gt" else 0, progress=False)
+
+            out[f"Hybrid ({HYBRID_NAMES[m]}{' + ICP' if use_icp else ''})"] = run
+    return out
+
+
+def compare_methods(data: DatasetReader | str, methods: dict[str, Callable], mask_sources: dict[str, tuple[str, list[int]]],
+                    min_px: int = 400, threshold: float = 0.1):
+    """Run every method on every mask source and evaluate each run on the same images.
+
+    Args:
+        data: a :class:`~sixdpose.datasets.base.DatasetReader` or a dataset path.
+        methods: ``{display name: run(reader, masks, indices) -> list[PoseEstimate]}``
+            (e.g. :func:`hybrid_methods`).
+        mask_sources: ``{label: (masks, image indices)}`` with ``masks`` ``"gt"`` or a prediction
+            directory; every listed image is evaluated, so an image where nothing was detected counts
+            its instances as failures.
+        min_px, threshold: the evaluation protocol (:func:`~sixdpose.evaluation.evaluate.evaluate`).
+    Returns:
+        ``(table, runs)``: a tidy ``pandas.DataFrame`` with one row per (masks, method) and columns
+        ``masks, method, add_s, n_gt, n_correct, fps, instances_per_s``; and ``{(masks, method): Run}``.
+    """
+    import pandas as pd
+
+    reader = as_reader(data)
+    keys = reader.keys()
+    rows, runs = [], {}
+    for label, (masks, indices) in mask_sources.items():
+        images = [keys[i] for i in indices]
+        for name, run in methods.items():
+            est = run(reader, masks, indices)
+            res = evaluate(reader, est, min_px=min_px, threshold=threshold, images=images)
+            runs[(label, name)] = Run(name, label, est, res)
+            rows.append({"masks": label, "method": name, "add_s": res.accuracy, "n_gt": res.n_gt, "n_correct": res.n_correct,
+                         "fps": res.fps, "instances_per_s": res.instances_per_s})
+    return pd.DataFrame(rows), runs
