@@ -1,6 +1,7 @@
 # sixdpose: make targets are the dependency graph of the project.
 #   make setup      system packages (as root) + .venv from uv.lock
 #   make test       everything CI runs: unit/integration tests + every notebook on the smoke profile
+#   make test-fast  the edit loop: tests without Drake generation or slow training (under 2 minutes)
 #   make demo       the whole chain at a small scale on a laptop CPU (data/demo, figures/)
 #   make reproduce  the paper-scale run (GPU machine): 25,000 images, all notebooks
 #   make benchmark  the benchmark scripts (print their figures)
@@ -16,7 +17,7 @@ export SIXDPOSE_YCB
 WORKERS ?= 2
 PAPERMILL := $(PY) -m papermill --cwd notebooks --log-output --no-progress-bar
 
-.PHONY: setup apt venv test test-unit test-notebooks demo reproduce benchmark clean-data
+.PHONY: setup apt venv test test-fast notebooks-sync demo reproduce benchmark clean-data
 
 setup: apt venv
 
@@ -37,6 +38,13 @@ $(VENV)/.synced: pyproject.toml uv.lock
 test: setup
 	$(PY) -m pytest -p no:dash -q tests
 	SIXDPOSE_PROFILE=smoke $(PY) -m pytest -p no:dash -q --nbval-lax notebooks
+
+test-fast: setup
+	$(PY) -m pytest -p no:dash -q -m "not slow and not drake" tests
+
+# notebooks/NN_*.py (jupytext percent format) are the sources; the .ipynb twins are written from them
+notebooks-sync: setup
+	@for f in notebooks/[0-9]*.py; do $(VENV)/bin/jupytext --quiet --to ipynb --update "$$f"; done
 
 demo: setup
 	mkdir -p notebooks/executed figures

@@ -22,6 +22,14 @@ def tree_digest(root: Path) -> dict[str, str]:
     }
 
 
+def pytest_collection_modifyitems(config, items):
+    """Mark every test that generates data with Drake (``tiny_dataset`` or any test of
+    test_generation.py) as ``drake``: ``make test-fast`` leaves those out."""
+    for item in items:
+        if "tiny_dataset" in getattr(item, "fixturenames", ()) or item.path.name == "test_generation.py":
+            item.add_marker(pytest.mark.drake)
+
+
 @pytest.fixture(scope="session")
 def ycb_dir() -> Path:
     """The YCB asset directory (``$SIXDPOSE_YCB`` or ../shared/data/ycb); skips if absent."""

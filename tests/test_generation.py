@@ -213,7 +213,7 @@ def test_foreign_or_mismatched_output(tmp_path, ycb_dir, tiny_dataset):
     foreign.mkdir()
     (foreign / "notes.txt").write_text("mine")
     r = _cli("generate", "--profile", "smoke", "--out", str(foreign), "--assets", str(ycb_dir))
-    assert r.returncode == 2 and "not a sixdpose dataset" in r.stderr
+    assert r.returncode == 2 and "not written by `sixdpose generate`" in r.stderr
     assert sorted(p.name for p in foreign.iterdir()) == ["notes.txt"]
     # an existing dataset with another config is refused, untouched
     before = tree_digest(tiny_dataset)

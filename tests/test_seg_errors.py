@@ -148,7 +148,8 @@ def test_image_without_annotations_and_no_detections(toy, run, tmp_path):
     import yaml
 
     from sixdpose.segmentation.evaluate import evaluate
-    from sixdpose.segmentation.infer import load_prediction, segment
+    from sixdpose.artifacts.predictions import prediction_path
+    from sixdpose.segmentation.infer import segment
 
     gt = yaml.safe_load((toy / "gt.yml").read_text())
     data = tmp_path / "data"
@@ -159,9 +160,9 @@ def test_image_without_annotations_and_no_detections(toy, run, tmp_path):
     (data / "gt.yml").write_text(yaml.safe_dump(gt))
     r = segment(data, run, tmp_path / "pred", score_thresh=1.01, progress=False)  # nothing passes
     assert r["images"] == 3 and r["detections"] == 0
-    p = load_prediction(tmp_path / "pred", 0, 0)
-    assert p["masks"].shape == (0, 480, 640) and p["masks"].dtype == bool
-    assert p["labels"].shape == (0,) and p["scores"].dtype == np.float32
+    with np.load(prediction_path(tmp_path / "pred", 0, 0)) as p:
+        assert p["masks"].shape == (0, 480, 640) and p["masks"].dtype == bool
+        assert p["labels"].shape == (0,) and p["scores"].dtype == np.float32
     m = evaluate(data, tmp_path / "pred", tmp_path / "fig")
     assert m["n_images"] == 3 and m["n_det"] == 0
     assert m["overall"]["mask"]["AP"] == 0.0 and m["overall"]["box"]["AP50"] == 0.0

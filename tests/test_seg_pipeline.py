@@ -85,7 +85,7 @@ def test_overfits_training_images(seg_data, predicted, tmp_path):
 def test_segment_output_format(seg_data, trained, predicted):
     """The npz files are what the registration stage reads (see the package docstring)."""
     from sixdpose.datasets import open_dataset
-    from sixdpose.segmentation import load_prediction, pred_path
+    from sixdpose.artifacts.predictions import prediction_path, read_predictions
 
     out, r = predicted
     split = json.loads((trained[0] / "split.json").read_text())
@@ -95,20 +95,20 @@ def test_segment_output_format(seg_data, trained, predicted):
     ids = set(ds.object_ids)
     samples = {k: ds[i] for i, k in enumerate(ds.keys())}
     for s, i in keys:
-        path = pred_path(out, s, i)
+        path = prediction_path(out, s, i)
         assert path.name == f"{s}_{i}.npz" and path.is_file()
         with np.load(path) as z:
-            assert sorted(z.files) == ["labels", "masks", "scores"]
+            assert sorted(z.files) == ["boxes", "labels", "masks", "scores"]
             masks, labels, scores = z["masks"], z["labels"], z["scores"]
         H, W = samples[(s, i)].rgb.shape[:2]
         assert masks.dtype == bool and masks.shape[1:] == (H, W) and masks.shape[0] == len(labels) == len(scores)
         assert np.issubdtype(labels.dtype, np.integer) and scores.dtype == np.float32
         assert set(labels.tolist()) <= ids  # dataset obj ids, not class indices
         assert np.all(np.diff(scores) <= 0) and np.all((scores >= 0) & (scores <= 1))
-        p = load_prediction(out, s, i)
-        assert np.array_equal(p["masks"], masks)
+        dets = read_predictions(out, s, i)
+        assert len(dets) == len(masks) and all(np.array_equal(d.mask, m) for d, m in zip(dets, masks))
     res = json.loads((out / "coco_results.json").read_text())
-    assert len(res) == sum(len(load_prediction(out, s, i)["labels"]) for s, i in keys)
+    assert len(res) == sum(len(read_predictions(out, s, i)) for s, i in keys)
     from pycocotools import mask as mask_util
 
     if res:
@@ -163,18 +163,14 @@ def test_hybrid_runner_reads_segment_output(seg_data, trained, predicted, tmp_pa
     """``sixdpose register --masks PRED_DIR`` consumes what ``segment`` wrote: one row per detection
     at or above --min-score, on the images segment covered."""
     from sixdpose.cli import main
-    from sixdpose.registration.runner import load_predicted_masks
-    from sixdpose.segmentation import load_prediction
+    from sixdpose.artifacts.predictions import read_predictions
 
     out, _ = predicted
     keys = [tuple(k) for k in json.loads((trained[0] / "split.json").read_text())["train"]["keys"]]
     expected = 0
     for s, i in keys:
-        dets = load_predicted_masks(out, s, i)
-        p = load_prediction(out, s, i)
-        assert [d[0] for d in dets] == p["labels"].tolist()
-        assert all(np.array_equal(d[2], m) for d, m in zip(dets, p["masks"]))
-        expected += int((p["scores"] >= 0.3).sum())
+        dets = read_predictions(out, s, i)
+        expected += sum(d.score >= 0.3 for d in dets)
     csv = tmp_path / "pred_rows.csv"
     assert main(["register", "--data", str(seg_data), "--method", "fgr", "--masks", str(out), "--min-score", "0.3",
                  "--out", str(csv), "--workers", "1", "--no-progress"]) == 0

@@ -69,7 +69,7 @@ class Config:
         fields = {f.name: f for f in dataclasses.fields(cls)}
         bad = sorted(set(d) - set(fields))
         if bad:
-            raise ConfigError(f"{cls.__name__}: unknown field(s) {', '.join(bad)}")
+            raise ConfigError(f"{cls.__name__}: unknown config field(s) {', '.join(bad)}")
         hints = typing.get_type_hints(cls)
         kw = {}
         for k, v in d.items():
@@ -99,7 +99,7 @@ class Config:
         names = {f.name for f in dataclasses.fields(self)}
         bad = sorted((set(flat) | set(nested)) - names)
         if bad:
-            raise ConfigError(f"{type(self).__name__}: unknown field(s) {', '.join(bad)} (known: {', '.join(sorted(names))})")
+            raise ConfigError(f"{type(self).__name__}: unknown config field(s) {', '.join(bad)} (known: {', '.join(sorted(names))})")
         for head, sub in nested.items():
             cur = flat.get(head, getattr(self, head))
             if not isinstance(cur, Config):
@@ -133,7 +133,7 @@ class Config:
         except FileNotFoundError:
             raise ConfigError(f"{path}: config file not found") from None
         except (OSError, yaml.YAMLError) as e:
-            raise ConfigError(f"{path}: unreadable config ({str(e).splitlines()[0]})") from None
+            raise ConfigError(f"{path}: corrupt config ({str(e).splitlines()[0]})") from None
         try:
             return cls.from_dict(d)
         except ConfigError as e:

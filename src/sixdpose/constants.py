@@ -30,11 +30,6 @@ MERGED_MASK_CODES: dict[str, int] = dict(
     zip(TARGET_OBJECTS, (14, 28, 42, 56, 70, 85, 99, 113, 127, 141, 155, 170, 184, 198, 212, 226, 240, 255))
 )
 
-#: Objects the paper treats as symmetric (marked * in section III-B).
-SYMMETRIC_OBJECTS: frozenset[str] = frozenset(
-    {"056_tennis_ball", "053_mini_soccer_ball", "013_apple", "029_plate"}
-)
-
 #: At most this many instances of one object per scene (section III-C).
 MAX_INSTANCES_PER_OBJECT = 4
 

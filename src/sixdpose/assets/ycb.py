@@ -32,14 +32,16 @@ class YcbObject:
     Attributes:
         name: YCB name, e.g. ``"006_mustard_bottle"``.
         mass: mass in kg.
-        role: ``"target"`` (one of the paper's 18 objects of interest) or ``"noise"``.
-        symmetric: whether the paper treats the object as symmetric.
+        symmetric: whether the object is evaluated with ADD-S (the paper's starred objects); the one
+            source of this flag (written to every dataset's ``models_info.yml``).
         mesh_dir: directory holding ``textured.obj`` etc.
+
+    The ``role`` column of ``objects.csv`` is informational: which objects are targets is the
+    generator's choice (:data:`sixdpose.constants.TARGET_OBJECTS` for the paper's dataset).
     """
 
     name: str
     mass: float
-    role: str
     symmetric: bool
     mesh_dir: Path
 
@@ -93,7 +95,7 @@ def load_catalog(root: str | os.PathLike) -> dict[str, YcbObject]:
     out: dict[str, YcbObject] = {}
     with open(csv_path, newline="") as f:
         reader = csv.DictReader(f)
-        need = {"name", "mass_kg", "role", "symmetric"}
+        need = {"name", "mass_kg", "symmetric"}
         if reader.fieldnames is None or not need <= set(reader.fieldnames):
             raise AssetError(f"{csv_path}: header must contain {sorted(need)}")
         for line, row in enumerate(reader, start=2):
@@ -105,10 +107,7 @@ def load_catalog(root: str | os.PathLike) -> dict[str, YcbObject]:
                 sym = bool(int(row["symmetric"]))
             except (TypeError, ValueError) as e:
                 raise AssetError(f"{csv_path}:{line}: bad mass_kg/symmetric for {name!r} ({e})") from None
-            role = (row["role"] or "").strip()
-            if role not in ("target", "noise"):
-                raise AssetError(f"{csv_path}:{line}: role must be 'target' or 'noise', got {role!r}")
-            obj = YcbObject(name, mass, role, sym, root / name / MESH_SUBDIR)
+            obj = YcbObject(name, mass, sym, root / name / MESH_SUBDIR)
             for fname in ("textured.obj", "texture_map.png"):
                 if not (obj.mesh_dir / fname).is_file():
                     raise AssetError(f"{obj.mesh_dir / fname}: missing model file for {name}")

@@ -38,7 +38,7 @@ def gt_surface_errors(dataset_dir: str | Path, assets: str | Path | None = None,
                 continue
             p_O = (p_C - inst.t) @ inst.R  # R^T (p - t)
             d = scenes[inst.obj_name].compute_distance(o3d.core.Tensor(p_O.astype(np.float32))).numpy()
-            out.append({"im_id": im_id, "obj_name": inst.obj_name, "inst": inst.inst, "n": len(d),
+            out.append({"im_id": s.im_id, "obj_name": inst.obj_name, "inst": inst.inst, "n": len(d),
                         "mean": float(d.mean()), "median": float(np.median(d))})
     return out
 

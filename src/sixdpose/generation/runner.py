@@ -19,7 +19,7 @@ import numpy as np
 
 from .. import __version__
 from ..assets import AssetError, load_catalog, load_mesh, physical_properties, point_cloud_diameter, resolve_assets_dir, sample_surface
-from ..constants import SYMMETRIC_OBJECTS, TARGET_OBJECTS, obj_id_of
+from ..constants import TARGET_OBJECTS, obj_id_of
 from .config import GenerationConfig
 from .config import profile as get_profile
 from .scene import camera_arc, default_pools, sample_scene, scene_rng
@@ -160,7 +160,7 @@ def write_models(root: Path, cfg: GenerationConfig, catalog) -> None:
             "diameter": float(point_cloud_diameter(mesh.vertices)),
             "min_x": float(lo[0]), "min_y": float(lo[1]), "min_z": float(lo[2]),
             "size_x": float(hi[0] - lo[0]), "size_y": float(hi[1] - lo[1]), "size_z": float(hi[2] - lo[2]),
-            "symmetric": name in SYMMETRIC_OBJECTS,
+            "symmetric": catalog[name].symmetric,
         }
     write_models_info(root, info)
 
