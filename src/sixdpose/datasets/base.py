@@ -82,6 +82,10 @@ class ObjectModel:
         symmetric: whether ADD-S (not ADD) applies.
         mesh: ``(vertices (V, 3) float64 metres, faces (F, 3) int64)`` when the model file is a mesh,
             else ``None`` (synthetic reference clouds are point clouds).
+        symmetries: the object's symmetry annotation in the BOP ``models_info.json`` form
+            (``{"symmetries_discrete": [...], "symmetries_continuous": [...], "diameter": mm}``,
+            millimetres), or ``None`` if the dataset has none (see
+            :func:`sixdpose.evaluation.metrics.symmetry_transformations`).
     """
 
     obj_name: str
@@ -92,6 +96,7 @@ class ObjectModel:
     diameter: float
     symmetric: bool
     mesh: tuple[np.ndarray, np.ndarray] | None = None
+    symmetries: dict | None = None
 
 
 @runtime_checkable

@@ -254,6 +254,8 @@ class BopDataset:
         m = ObjectModel(
             self.object_ids[obj_id], obj_id, pts, nrm, ply.colors, float(info["diameter"]) / 1000.0, self.is_symmetric(obj_id),
             mesh=(pts, tris) if len(tris) else None,
+            symmetries={k: info[k] for k in ("symmetries_discrete", "symmetries_continuous", "diameter") if k in info}
+            if _is_symmetric(info) else None,
         )
         self._models[obj_id] = m
         return m

@@ -1,4 +1,4 @@
-"""``sixdpose evaluate``: ADD(-S) accuracy per object and timing of a results CSV."""
+"""``sixdpose evaluate``: ADD(-S) accuracy, BOP 2019 average recalls, ADD-S AUC and timing of a results CSV."""
 
 from __future__ import annotations
 
@@ -21,6 +21,8 @@ def register(sub) -> None:
                    help="evaluate every image of the split (default: the images in the results); use it with "
                         "predicted masks, where images without detections have no rows")
     p.add_argument("--label", default=None, help="method label for the tables (default: results file stem)")
+    p.add_argument("--no-bop", action="store_true",
+                   help="skip the BOP 2019 scores (AR_VSD, AR_MSSD, AR_MSPD, AR) and the ADD-S AUC")
     p.set_defaults(func=_run)
 
 
@@ -32,7 +34,7 @@ def _run(args) -> int:
 
     res_path = Path(args.results)
     out = Path(args.out) if args.out else res_path.with_name(res_path.stem + "_eval")
-    claim_output_dir(out, "evaluate")
+    claim_output_dir(out, "evaluate", create=False)  # refuse a foreign directory before any work
     ests = read_results(res_path)
     kw = {}
     if args.symmetric_ids:
@@ -44,10 +46,17 @@ def _run(args) -> int:
             raise UserError(f"--symmetric-ids: expected comma-separated integers, got {args.symmetric_ids!r}") from None
     ds = open_dataset(args.data, split=args.split, **kw)
     res = evaluate(ds, ests, min_px=args.min_px, threshold=args.threshold, progress=True,
-                   images=ds.keys() if args.all_images else None)
+                   images=ds.keys() if args.all_images else None, bop=not args.no_bop)
+    claim_output_dir(out, "evaluate")
     write_tables(res, out, label=args.label or res_path.stem)
     print(f"ADD(-S) accuracy {res.accuracy:.2f}% ({res.n_correct}/{res.n_gt} GT instances; mean over objects "
           f"{res.mean_object_accuracy:.2f}%), {res.fps:.3f} FPS, {res.instances_per_s:.3f} instances/s -> {out}")
+    if res.bop:
+        b = res.bop
+        print(f"BOP: AR {b['ar']:.2f} (VSD {b['ar_vsd']:.2f}, MSSD {b['ar_mssd']:.2f}, MSPD {b['ar_mspd']:.2f}); "
+              f"ADD-S AUC {b['adds_auc']:.2f}" + (f"; symmetric without annotation (identity only in MSSD/MSPD): "
+                                                  f"{b['unannotated_symmetric_ids']}" if b["unannotated_symmetric_ids"] else ""))
     for oid, v in res.per_object.items():
-        print(f"  {oid:>3} {v['name']:<28} {v['n_correct']:>4}/{v['n_gt']:<4} {v['accuracy']:6.2f}%")
+        extra = f"  AR {v['bop']['ar']:6.2f}  ADD-S AUC {v['bop']['adds_auc']:6.2f}" if "bop" in v else ""
+        print(f"  {oid:>3} {v['name']:<28} {v['n_correct']:>4}/{v['n_gt']:<4} {v['accuracy']:6.2f}%{extra}")
     return 0

@@ -28,6 +28,7 @@ from ..artifacts.tables import write_table
 from ..datasets.base import DatasetReader, as_reader
 from ..errors import SixdposeError
 from ..fileio import atomic_write_json
+from . import bop as bop_scores
 from . import metrics
 
 
@@ -64,6 +65,9 @@ class EvalResult:
         accuracy: % over all counted GT instances. mean_object_accuracy: mean of per-object %.
         n_gt, n_correct: counts. fps, instances_per_s, n_images, n_estimates, total_time: timing.
         records: one :class:`MatchRecord` per counted GT instance.
+        bop: the BOP 2019 scores (:mod:`.bop`): ``ar``, ``ar_vsd``, ``ar_mssd``, ``ar_mspd`` and the
+            YCB-Video ``adds_auc`` (percent), plus ``unannotated_symmetric_ids``; per object in
+            ``per_object[obj_id]["bop"]``. Empty when not computed.
     """
 
     per_object: dict
@@ -77,14 +81,15 @@ class EvalResult:
     n_estimates: int
     total_time: float
     records: list = field(default_factory=list)
+    bop: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
-        """The scalar fields as a dict (JSON-serialisable)."""
+        """The scalar fields (and the BOP scores) as a dict (JSON-serialisable)."""
         return {k: v for k, v in self.__dict__.items() if k not in ("per_object", "records")}
 
 
 def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate], min_px: int = 400,
-             threshold: float = 0.1, progress: bool = False, images=None) -> EvalResult:
+             threshold: float = 0.1, progress: bool = False, images=None, bop: bool = False) -> EvalResult:
     """Score ``estimates`` against ``dataset`` (see the module docstring for the protocol).
 
     Linear in the number of images: each evaluated image's annotations are read once, without its
@@ -99,6 +104,8 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
             instances as failures. ``None``: the images that appear in the results (every image if
             there are none), which suits GT-mask runs on a subset; with predicted masks an image where
             nothing was detected has no rows, so pass the registered images (or ``dataset.keys()``).
+        bop: also compute the BOP 2019 scores and the ADD-S AUC (:mod:`.bop`; VSD reads the test
+            depth and renders the model mesh by ray casting, so it costs a few ms per instance).
     Returns:
         :class:`EvalResult`.
     """
@@ -126,8 +133,10 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
         eval_keys = [k for k in keys if k in want]
     else:
         eval_keys = [k for k in keys if k in by_img] if by_img else keys
+    bop_err: dict[int, list] = defaultdict(list)
+    syms: dict[int, list] = {}
     for key in tqdm(eval_keys, desc="evaluate", unit="img", disable=not progress):
-        sample = dataset.load(key, masks=False, rgb=False, depth=False)
+        sample = dataset.load(key, masks=False, rgb=False, depth=bop and dataset.has_depth)
         gts = [g for g in sample.instances if g.px_visib < 0 or g.px_visib >= min_px]
         ests = by_img.get(key, [])
         for oid in sorted({g.obj_id for g in gts}):
@@ -148,12 +157,27 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
                 best = matched[j] if ok else (float(err[i, j]) if i is not None else math.nan)
                 records.append(MatchRecord(key[0], key[1], oid, sample.instances.index(g), float(best), ok,
                                            None if i is None else e_o[i]))
+                if bop:
+                    if oid not in syms:
+                        syms[oid] = bop_scores.model_symmetries(model, dataset.location)
+                    with_vsd = sample.depth is not None and model.mesh is not None
+                    bop_err[oid].append(bop_scores.instance_errors(sample, g, model, records[-1].estimate, syms[oid], with_vsd))
                 n_gt_obj[oid] += 1
                 n_ok_obj[oid] += int(ok)
     per_object = {
         oid: {"name": names.get(oid, str(oid)), "n_gt": n_gt_obj[oid], "n_correct": n_ok_obj[oid], "accuracy": 100.0 * n_ok_obj[oid] / n_gt_obj[oid]}
         for oid in sorted(n_gt_obj)
     }
+    bop_all: dict = {}
+    if bop:
+        width = sample.depth.shape[1] if eval_keys and sample.depth is not None else 640  # MSPD's image-width scaling
+        diam = {oid: dataset.model(oid).diameter for oid in bop_err}
+        for oid, errs in bop_err.items():
+            per_object[oid]["bop"] = bop_scores.summarize(errs, [diam[oid]] * len(errs), width)
+        every = [e for errs in bop_err.values() for e in errs]
+        bop_all = bop_scores.summarize(every, [diam[o] for o, errs in bop_err.items() for _ in errs], width)
+        bop_all["unannotated_symmetric_ids"] = sorted(o for o in bop_err if dataset.model(o).symmetric
+                                                      and dataset.model(o).symmetries is None)
     n_gt = sum(n_gt_obj.values())
     n_ok = sum(n_ok_obj.values())
     img_time = {k: max(e.time for e in v) for k, v in by_img.items()}
@@ -171,25 +195,31 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
         n_estimates=n_est,
         total_time=total,
         records=records,
+        bop=bop_all,
     )
 
 
 def write_tables(res: EvalResult, out_dir: str | Path, label: str = "method") -> dict[str, Path]:
-    """Write ``add_s_per_object.csv``, ``add_s.tex``, ``timing.csv`` and ``summary.json`` to ``out_dir``.
+    """Write ``add_s_per_object.csv`` (with the BOP scores when computed), ``add_s.tex``, ``timing.csv``
+    and ``summary.json`` to ``out_dir``.
 
     Returns:
         name -> path of each written file.
     """
     out = Path(out_dir)
-    rows = [{"obj_id": oid, "name": v["name"], "n_gt": v["n_gt"], "n_correct": v["n_correct"], "add_s_accuracy": v["accuracy"]}
-            for oid, v in res.per_object.items()]
+    bop_cols = ["ar", "ar_vsd", "ar_mssd", "ar_mspd", "adds_auc"] if res.bop else []
+    rows = [{"obj_id": oid, "name": v["name"], "n_gt": v["n_gt"], "n_correct": v["n_correct"], "add_s_accuracy": v["accuracy"],
+             **{c: v["bop"][c] for c in bop_cols}} for oid, v in res.per_object.items()]
     rows.append({"obj_id": "all", "name": "mean over instances", "n_gt": res.n_gt, "n_correct": res.n_correct,
-                 "add_s_accuracy": res.accuracy})
+                 "add_s_accuracy": res.accuracy, **{c: res.bop[c] for c in bop_cols}})
     rows.append({"obj_id": "objects", "name": "mean over objects", "n_gt": "", "n_correct": "",
-                 "add_s_accuracy": res.mean_object_accuracy})
+                 "add_s_accuracy": res.mean_object_accuracy,
+                 **{c: float(np.nanmean([v["bop"][c] for v in res.per_object.values()])) if res.per_object else math.nan
+                    for c in bop_cols}})
     paths = {"per_object": out / "add_s_per_object.csv", "latex": out / "add_s.tex"}
-    write_table(rows, ["obj_id", "name", "n_gt", "n_correct", "add_s_accuracy"], paths["per_object"], paths["latex"],
-                headers=["Id", "Object", "GT instances", "Correct", "ADD(-S) (\\%)"],
+    write_table(rows, ["obj_id", "name", "n_gt", "n_correct", "add_s_accuracy"] + bop_cols, paths["per_object"], paths["latex"],
+                headers=["Id", "Object", "GT instances", "Correct", "ADD(-S) (\\%)"]
+                + ["AR", "AR$_{VSD}$", "AR$_{MSSD}$", "AR$_{MSPD}$", "ADD-S AUC"][: len(bop_cols)],
                 comment=f"{label}: FPS {res.fps:.3f}, instances/s {res.instances_per_s:.3f}")
     paths["timing"] = out / "timing.csv"
     write_table([{"method": label, "n_images": res.n_images, "n_estimates": res.n_estimates, "total_time_s": res.total_time,
