@@ -291,3 +291,25 @@ def test_score0_rows_for_few_points_unknown_ids_and_nan_depth(pose_ds, tmp_path)
     assert rows[1].score == 0 and "5 valid depth" in rows[1].reason
     assert rows[2].score == 0 and "not a class" in rows[2].reason
     assert len({r.time for r in rows}) == 1 and rows[0].time > 0
+
+
+def test_icp_colour_rows_and_predicted_masks(smoke_run, pose_ds, tmp_path):
+    from sixdpose.artifacts.poses import read_results
+    from sixdpose.artifacts.predictions import write_predictions
+    from sixdpose.datasets.base import as_reader
+    from sixdpose.evaluation.evaluate import evaluate
+
+    reader = as_reader(pose_ds)
+    pred = tmp_path / "pred"
+    for key in reader.keys():
+        s = reader.load(key)
+        masks = np.stack([g.mask for g in s.instances])
+        write_predictions(pred, *key, masks, [g.obj_id for g in s.instances], np.full(len(masks), 0.9))
+    out = tmp_path / "icp.csv"
+    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(smoke_run), "--masks", str(pred), "--icp",
+                 "--colour-verify", "--out", str(out), "--no-progress"]) == 0
+    rows = read_results(out)
+    assert len(rows) == 4 and all(r.score == pytest.approx(0.9) for r in rows)
+    assert evaluate(reader, rows, min_px=0).accuracy >= 75.0
+    (pred / "0_0.npz").write_bytes(b"")  # an empty prediction file: one line naming it
+    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(smoke_run), "--masks", str(pred), "--out", str(out)]) == 2
