@@ -313,3 +313,33 @@ def test_icp_colour_rows_and_predicted_masks(smoke_run, pose_ds, tmp_path):
     assert evaluate(reader, rows, min_px=0).accuracy >= 75.0
     (pred / "0_0.npz").write_bytes(b"")  # an empty prediction file: one line naming it
     assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(smoke_run), "--masks", str(pred), "--out", str(out)]) == 2
+
+
+@pytest.mark.parametrize("ov", [{"translation": "centroid_offset", "rotation": "6d"}, {"norm": "group"}, {"norm": "batch"},
+                                {"crop": 0}])
+def test_ablation_options_train_and_predict(pose_ds, tmp_path, ov):
+    from sixdpose.pose.infer import predict_dataset
+    from sixdpose.pose.train import train_pose
+
+    s = train_pose(pose_ds, tmp_path / "r", profile="smoke", progress=False, epochs=1, repeat=1, **ov)
+    assert np.isfinite(s["last_loss"])
+    rows, _ = predict_dataset(pose_ds, tmp_path / "r")
+    assert len(rows) == 4 and all(r.score > 0 and np.isfinite(r.t).all() for r in rows)
+
+
+def test_ddp_two_processes_gloo(pose_ds, tmp_path):
+    import os
+    import shutil
+    import subprocess
+
+    torchrun = Path(sys.executable).with_name("torchrun")
+    if not torchrun.exists() and not shutil.which("torchrun"):
+        pytest.skip("torchrun not installed")
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(Path(__file__).parents[1] / "src"))
+    run = tmp_path / "ddp"
+    p = subprocess.run([str(torchrun if torchrun.exists() else "torchrun"), "--nproc_per_node", "2", "--master_port", "29517",
+                        "-m", "sixdpose.cli", "train-pose", "--data", str(pose_ds), "--out", str(run), "--profile", "smoke",
+                        "--set", "epochs=2", "--set", "repeat=2", "--no-progress"], env=env, capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr[-2000:]
+    c = ck.load(run / ck.LAST)
+    assert c["world_size"] == 2 and len(c["rng"]) == 2 and c["epoch"] == 2
