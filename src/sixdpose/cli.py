@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "sixdpose.datasets.cli",
     "sixdpose.segmentation.cli",
     "sixdpose.registration.cli",
+    "sixdpose.pose.cli",
     "sixdpose.evaluation.cli",
 )
 

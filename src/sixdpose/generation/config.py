@@ -121,6 +121,7 @@ PROFILES: dict[str, GenerationConfig] = {
     "demo": GenerationConfig(scenes=12, views=20),
     "val": GenerationConfig(scenes=6, views=20, seed=100),
     "test": GenerationConfig(scenes=10, views=20, seed=300),
+    "train": GenerationConfig(scenes=60, views=20, seed=500),
     "paper": GenerationConfig(scenes=1250, views=20),
 }
 

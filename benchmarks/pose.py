@@ -1,0 +1,192 @@
+"""Benchmark of the learned pose stage: training throughput and end-to-end inference FPS.
+
+Usage::
+
+    python benchmarks/pose.py [--profile cpu|smoke|paper] [--pose RUN --refiner RUN2] [--device cpu|cuda]
+                              [--instances 6] [--frames 10] [--steps 10] [--threads N] [--json OUT]
+
+* Training throughput (instances/s): optimiser steps of the main network and of the refiner
+  (2 unrolled iterations) for the profile's config and batch size, on synthetic inputs (random crops
+  or full images, the profile's point counts), after 2 warm-up steps.
+* Inference FPS (paper section V-A): :meth:`Estimator.predict` on one 640x480 RGB-D frame holding
+  ``--instances`` masked objects: point sampling, crops, one batched forward of every instance, 2
+  refinement iterations, copies to the CPU. Frames are built in memory beforehand (no disk reads);
+  segmentation is not included. Without ``--pose`` untrained networks of the profile are timed
+  (the cost does not depend on the weights).
+* Peak memory: CPU: the process' peak resident set size (MiB); CUDA: ``torch.cuda.max_memory_allocated``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+
+from sixdpose.datasets.base import Instance, Sample  # noqa: E402
+from sixdpose.pose import checkpoint as ck  # noqa: E402
+from sixdpose.pose.config import profile_config, refiner_profile_config  # noqa: E402
+from sixdpose.pose.geometry import compose_refinement, to_object_frame  # noqa: E402
+from sixdpose.pose.infer import Estimator  # noqa: E402
+from sixdpose.pose.loss import pose_loss  # noqa: E402
+from sixdpose.pose.model import build_posenet, build_refiner  # noqa: E402
+
+K = np.array([[615.0, 0, 319.5], [0, 615.0, 239.5], [0, 0, 1]])
+
+
+def peak_mib(device) -> float:
+    """Peak memory so far (MiB): CUDA allocator peak, or the process' max RSS on CPU."""
+    if device.type == "cuda":
+        return torch.cuda.max_memory_allocated(device) / 2**20
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def synthetic_frame(n: int, seed: int = 0) -> Sample:
+    """A 640x480 frame with ``n`` square masked objects (~90x90 px) on a depth plane at 0.6-0.9 m."""
+    rng = np.random.default_rng(seed)
+    H, W = 480, 640
+    rgb = rng.integers(0, 255, (H, W, 3), dtype=np.uint8)
+    depth = np.full((H, W), 0.9, np.float32)
+    insts = []
+    for k in range(n):
+        v0, u0 = 40 + (k // 4) * 130, 20 + (k % 4) * 150
+        m = np.zeros((H, W), bool)
+        m[v0:v0 + 90, u0:u0 + 90] = True
+        depth[m] = 0.6 + 0.02 * rng.random(m.sum())
+        insts.append(Instance("obj", 1, k, np.eye(3), np.array([0, 0, 0.6]), m, int(m.sum())))
+    return Sample(0, 0, rgb, depth, K, insts)
+
+
+def fake_runs(profile: str, tmp: Path, classes: int = 21):
+    """Untrained pose and refiner checkpoints of a profile (for timing only)."""
+    cfg, rcfg = profile_config(profile), refiner_profile_config(profile)
+    cls = [[i + 1, f"obj{i + 1}", False] for i in range(classes)]
+    net, ref = build_posenet(cfg, classes), build_refiner(rcfg, classes, cfg.emb_dim)
+    base = {"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "classes": cls, "epoch": 0, "global_step": 0, "elapsed": 0.0}
+    ck.save_atomic(dict(base, kind="pose", config=cfg.to_dict(), arch=cfg.arch(), model=net.state_dict()), tmp / "pose.pt")
+    ck.save_atomic(dict(base, kind="refiner", config=rcfg.to_dict(), arch=rcfg.arch(), model=ref.state_dict(),
+                        pose={"classes": cls, "arch": cfg.arch(), "run": str(tmp / "pose.pt")}), tmp / "ref.pt")
+    return tmp / "pose.pt", tmp / "ref.pt"
+
+
+def train_throughput(profile: str, device, steps: int, inst_per_image: int = 6, classes: int = 21) -> dict:
+    """Instances per second of optimiser steps of the main network and of the refiner."""
+    cfg, rcfg = profile_config(profile), refiner_profile_config(profile)
+    torch.manual_seed(0)
+    net = build_posenet(cfg, classes).to(device).train()
+    ref = build_refiner(rcfg, classes, cfg.emb_dim).to(device).train()
+    opt, ropt = torch.optim.Adam(net.parameters(), 1e-4), torch.optim.Adam(ref.parameters(), 1e-4)
+    n = cfg.batch_size * inst_per_image
+    P, M = cfg.num_points, cfg.num_model_points
+    side = (cfg.crop, cfg.crop) if cfg.crop else (480, 640)
+    B = n if cfg.crop else cfg.batch_size
+    imgs = torch.randn(B, 3, *side, device=device)
+    img_index = torch.arange(n, device=device) if cfg.crop else torch.arange(n, device=device) // inst_per_image
+    choose = torch.randint(0, side[0] * side[1], (n, P), device=device)
+    cloud = torch.randn(n, P, 3, device=device) * 0.05 + torch.tensor([0, 0, 0.7], device=device)
+    obj = torch.randint(0, classes, (n,), device=device)
+    mp = torch.randn(n, M, 3, device=device) * 0.05
+    R_gt, t_gt = torch.eye(3, device=device).expand(n, 3, 3), cloud.mean(1)
+    sym = torch.zeros(n, dtype=torch.bool, device=device)
+    amp = device.type == "cuda"
+
+    def step_main():
+        with torch.autocast("cuda", dtype=torch.float16, enabled=amp):
+            out = net(imgs, img_index, choose, cloud, obj)
+        loss = pose_loss(out["R"].float(), out["t"].float(), R_gt, t_gt, mp, sym).mean()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+
+    def step_ref():
+        with torch.no_grad(), torch.autocast("cuda", dtype=torch.float16, enabled=amp):
+            out = net(imgs, img_index, choose, cloud, obj)
+        R, t, emb = out["R"].float(), out["t"].float(), out["emb"].float()
+        for _ in range(rcfg.iterations):
+            R_r, t_r = ref(to_object_frame(cloud, R, t), emb, obj)
+            R, t = compose_refinement(R, t, R_r, t_r)
+        loss = pose_loss(R, t, R_gt, t_gt, mp, sym).mean()
+        ropt.zero_grad()
+        loss.backward()
+        ropt.step()
+
+    res = {}
+    for name, fn in (("pose", step_main), ("refiner", step_ref)):
+        for _ in range(2):
+            fn()
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            fn()
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        res[f"train_{name}_instances_per_s"] = n * steps / (time.perf_counter() - t0)
+    res["train_instances_per_step"] = n
+    return res
+
+
+def inference_fps(pose, refiner, device, instances: int, frames: int) -> dict:
+    """End-to-end frames per second of Estimator.predict (pose net + 2 refinement iterations)."""
+    est = Estimator(pose, refiner, iterations=2, device=str(device))
+    frame = synthetic_frame(instances)
+    for r in est.predict(frame):  # warm-up (first-call allocations)
+        pass
+    times = []
+    for _ in range(frames):
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        t0 = time.perf_counter()
+        est.predict(frame)
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        times.append(time.perf_counter() - t0)
+    return {"infer_fps": 1.0 / float(np.mean(times)), "infer_ms_per_frame": 1000 * float(np.mean(times)),
+            "infer_instances_per_frame": instances}
+
+
+def main(argv=None) -> int:
+    """Parse the arguments, run the benchmarks, print (and optionally save) the figures."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--profile", default="cpu", choices=("smoke", "cpu", "paper"))
+    ap.add_argument("--pose", default=None, help="a trained pose run (default: untrained networks of --profile)")
+    ap.add_argument("--refiner", default=None, help="a trained refiner run (with --pose)")
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--instances", type=int, default=6, help="objects per frame (inference) and per image (training)")
+    ap.add_argument("--frames", type=int, default=10)
+    ap.add_argument("--steps", type=int, default=10)
+    ap.add_argument("--threads", type=int, default=0)
+    ap.add_argument("--json", default=None)
+    a = ap.parse_args(argv)
+    if a.threads:
+        torch.set_num_threads(a.threads)
+    device = torch.device(a.device)
+    if device.type == "cuda" and not torch.cuda.is_available():
+        print("CUDA is not available", file=sys.stderr)
+        return 2
+    out = {"profile": a.profile, "device": str(device), "threads": torch.get_num_threads()}
+    with tempfile.TemporaryDirectory() as tmp:
+        pose, ref = (a.pose, a.refiner) if a.pose else fake_runs(a.profile, Path(tmp))
+        out.update(inference_fps(pose, ref, device, a.instances, a.frames))
+        out["infer_peak_mib"] = peak_mib(device)
+        if device.type == "cuda":
+            torch.cuda.reset_peak_memory_stats(device)
+        out.update(train_throughput(a.profile, device, a.steps, a.instances))
+        out["train_peak_mib"] = peak_mib(device)
+    for k, v in out.items():
+        print(f"{k:32s} {v:.2f}" if isinstance(v, float) else f"{k:32s} {v}")
+    if a.json:
+        Path(a.json).write_text(json.dumps(out, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,100 @@
+"""Checkpoint files of the learned pose stage: atomic writes, validated reads.
+
+``RUN/last.pt`` (rewritten after every epoch) holds everything needed to resume; ``RUN/model.pt``
+(written when training finishes or stops on its time budget) holds what inference needs. Both are
+plain dictionaries readable with ``torch.load(..., weights_only=True)``::
+
+    format: "sixdpose-pose"   version: CHECKPOINT_VERSION   kind: "pose" | "refiner"
+    config: PoseConfig / RefinerConfig .to_dict()      arch: the shape-defining fields
+    classes: [[obj_id, name, symmetric], ...]          epoch, global_step, elapsed (training seconds)
+    model: state_dict
+    (refiner) pose: {"classes", "arch", "run"} of the main network it was trained on
+    (last.pt only) optimizer, scaler, rng: [per-rank state], world_size
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import torch
+
+from ..errors import SixdposeError
+from ..fileio import atomic_path
+from ..segmentation.checkpoint import rng_state, set_rng_state  # noqa: F401 - re-exported
+
+FORMAT = "sixdpose-pose"
+CHECKPOINT_VERSION = 1
+LAST = "last.pt"
+FINAL = "model.pt"
+
+
+class CheckpointError(SixdposeError):
+    """A pose checkpoint is missing, corrupt, or incompatible (other kind, classes or architecture)."""
+
+
+def save_atomic(obj: dict, path: str | Path) -> None:
+    """``torch.save`` to a temporary file beside ``path``, fsync, then rename."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        torch.save(obj, f)
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def resolve(path: str | Path) -> Path:
+    """The checkpoint file of ``path``: the file itself, or ``model.pt`` (else ``last.pt``) of a run dir."""
+    path = Path(path)
+    if path.is_dir():
+        for name in (FINAL, LAST):
+            if (path / name).is_file():
+                return path / name
+        raise CheckpointError(f"{path}: no {FINAL} or {LAST} in this run directory (training not run or not finished an epoch)")
+    if not path.exists():
+        raise CheckpointError(f"{path}: checkpoint not found")
+    return path
+
+
+def load(path: str | Path, kind: str | None = None) -> dict:
+    """Read and validate a checkpoint (file or run directory) onto the CPU.
+
+    Args:
+        path: checkpoint file or run directory. kind: required ``kind`` (``pose`` | ``refiner``) or None.
+    Raises:
+        CheckpointError: missing, corrupt, not a pose-stage checkpoint, other version or kind, incomplete.
+    """
+    path = resolve(path)
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:  # noqa: BLE001 - truncated zip, pickle garbage, ...
+        msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise CheckpointError(f"{path}: corrupt or unreadable checkpoint ({msg[:200]})") from None
+    if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
+        raise CheckpointError(f"{path}: not a sixdpose pose checkpoint")
+    if ckpt.get("version") != CHECKPOINT_VERSION:
+        raise CheckpointError(f"{path}: checkpoint format version {ckpt.get('version')} is not supported (expected {CHECKPOINT_VERSION})")
+    for key in ("kind", "config", "arch", "classes", "model", "epoch"):
+        if key not in ckpt:
+            raise CheckpointError(f"{path}: incomplete checkpoint (no {key!r})")
+    if kind is not None and ckpt["kind"] != kind:
+        raise CheckpointError(f"{path}: a {ckpt['kind']} checkpoint, expected a {kind} checkpoint")
+    if ckpt["kind"] == "refiner" and "pose" not in ckpt:
+        raise CheckpointError(f"{path}: incomplete refiner checkpoint (no 'pose')")
+    ckpt["path"] = str(path)
+    return ckpt
+
+
+def classes_of(ckpt: dict) -> list[tuple[int, str, bool]]:
+    """``[(obj_id, name, symmetric), ...]`` of a checkpoint."""
+    return [(int(a), str(b), bool(c)) for a, b, c in ckpt["classes"]]
+
+
+def check_refiner_matches(refiner: dict, pose: dict) -> None:
+    """Raise :class:`CheckpointError` unless ``refiner`` was trained on a main network with ``pose``'s
+    classes and architecture."""
+    want = refiner["pose"]
+    if [list(c) for c in want["classes"]] != [list(c) for c in pose["classes"]]:
+        raise CheckpointError(f"{refiner['path']}: refiner trained for other object classes than the pose run {pose['path']}")
+    if dict(want["arch"]) != dict(pose["arch"]):
+        diff = sorted(k for k in set(want["arch"]) | set(pose["arch"]) if want["arch"].get(k) != pose["arch"].get(k))
+        raise CheckpointError(f"{refiner['path']}: refiner trained on a pose run of another architecture than {pose['path']} "
+                              f"(differs in {', '.join(diff)})")

@@ -1,0 +1,139 @@
+"""Subcommands of the learned pose stage: ``train-pose``, ``train-refiner``, ``predict-pose``.
+
+Multi-process training: ``torchrun --nproc_per_node N -m sixdpose.cli train-pose ...`` (gloo on CPU,
+NCCL on GPUs; only rank 0 writes files).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from ..config import add_set_option, parse_overrides
+
+
+def _setup_logging(verbose: bool) -> None:
+    from ..segmentation.cli import _setup_logging as setup
+
+    setup(verbose)
+
+
+def _overrides(args) -> dict:
+    ov = parse_overrides(args.overrides)
+    for name in ("epochs", "seed", "time_budget"):
+        v = getattr(args, name, None)
+        if v is not None:
+            ov[name] = v
+    if getattr(args, "threads", None) is not None:
+        ov["num_threads"] = args.threads
+    return ov
+
+
+def _report(s: dict) -> None:
+    if int(os.environ.get("RANK", "0")) == 0:
+        extra = f", val ADD(-S) {s['val_add']:.1f} %" if s.get("val_add") is not None else ""
+        stop = " (stopped on the time budget)" if s["stopped_early"] else ""
+        print(f"trained {s['kind']}: {s['steps']} step(s), epochs {s['start_epoch']}->{s['epochs']}{stop}, loss "
+              f"{s['first_loss']:.4f} -> {s['last_loss']:.4f} m{extra}, {s['seconds']:.0f} s; run in {s['run_dir']}")
+
+
+def _cmd_train_pose(args) -> int:
+    from .train import train_pose
+
+    _setup_logging(args.verbose)
+    s = train_pose(args.data, args.out, profile=args.profile, resume=args.resume, masks=args.masks, val=args.val,
+                   device=args.device, progress=not args.no_progress, **_overrides(args))
+    _report(s)
+    return 0
+
+
+def _cmd_train_refiner(args) -> int:
+    from .train import train_refiner
+
+    _setup_logging(args.verbose)
+    s = train_refiner(args.pose, args.data, args.out, profile=args.profile, resume=args.resume, val=args.val,
+                      device=args.device, progress=not args.no_progress, **_overrides(args))
+    _report(s)
+    return 0
+
+
+def _cmd_predict(args) -> int:
+    import yaml
+
+    from ..artifacts.poses import RESULTS_HEADER, write_results
+    from ..fileio import atomic_write_text, claim_output_file
+    from .infer import predict_dataset
+
+    _setup_logging(args.verbose)
+    out = Path(args.out)
+    claim_output_file(out, RESULTS_HEADER)  # refuse a foreign file before any work
+    if args.threads:
+        import torch
+
+        torch.set_num_threads(args.threads)
+    rows, est = predict_dataset(args.data, args.pose, refiner=args.refiner, masks=args.masks, iterations=args.iterations,
+                                icp=args.icp, colour_verify=args.colour_verify, device=args.device, split=args.split,
+                                limit=args.limit, score_thresh=args.score_thresh, progress=not args.no_progress)
+    write_results(rows, out)
+    settings = dict(est.settings(), data=str(args.data), masks=args.masks, split=args.split, limit=args.limit)
+    atomic_write_text(out.with_name(out.stem + ".config.yml"), yaml.safe_dump(settings, sort_keys=True))
+    failed = sum(1 for r in rows if r.score == 0)
+    times = {(r.scene_id, r.im_id): r.time for r in rows}
+    fps = len(times) / sum(times.values()) if times and sum(times.values()) > 0 else float("nan")
+    print(f"{len(rows)} estimate(s) on {len(times)} image(s) ({failed} without an estimate), {fps:.2f} FPS; wrote {out}")
+    return 0
+
+
+def _train_args(p, refiner: bool) -> None:
+    p.add_argument("--data", required=True, help="training dataset (synthetic layout or BOP root), e.g. data/train")
+    p.add_argument("--out", required=True, help="run directory (config.json, metrics.csv, last.pt, model.pt)")
+    p.add_argument("--profile", choices=("smoke", "cpu", "paper"), default=None,
+                   help="named config (default smoke; on --resume: the run's)")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out from its last completed epoch")
+    p.add_argument("--val", default=None, help="validation dataset scored every epoch (ADD(-S) %% into metrics.csv), e.g. data/val")
+    p.add_argument("--epochs", type=int, help="number of epochs (may be raised on --resume)")
+    p.add_argument("--time-budget", dest="time_budget", type=float, help="seconds; stop after the epoch that exceeds it (0: none)")
+    p.add_argument("--seed", type=int, help="seed of initialisation, shuffling and sampling")
+    p.add_argument("--threads", type=int, help="torch CPU threads per process")
+    p.add_argument("--device", default=None, help="cpu, cuda or auto (default: GPU when present)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("-v", "--verbose", action="store_true", help="log every epoch")
+    add_set_option(p)
+
+
+def register(subparsers) -> None:
+    """Add ``train-pose``, ``train-refiner`` and ``predict-pose`` to the ``sixdpose`` parser."""
+    p = subparsers.add_parser("train-pose", help="train the learned pose network (paper IV-C)",
+                              description="Train the DenseFusion-like pose network (PSPNet/ResNet-18 colour embedding, "
+                              "point fusion, attention pooling). Profiles: smoke (CI), cpu (2 h on 2 cores with the "
+                              "refiner), paper (GPU). Multi-process: run under torchrun.")
+    _train_args(p, False)
+    p.add_argument("--masks", default="gt", help="gt (ground-truth masks) or PRED_DIR of `sixdpose segment`")
+    p.set_defaults(func=_cmd_train_pose)
+
+    p = subparsers.add_parser("train-refiner", help="train the iterative refiner on a trained pose network",
+                              description="Train the refiner on the (noised) poses of a finished train-pose run.")
+    p.add_argument("--pose", required=True, help="run directory of train-pose")
+    _train_args(p, True)
+    p.set_defaults(func=_cmd_train_refiner)
+
+    p = subparsers.add_parser("predict-pose", help="estimate poses with a trained pose network (BOP results CSV)",
+                              description="Estimate the pose of every masked instance; writes a BOP results CSV "
+                              "(score-0 rows for unusable instances) and <out stem>.config.yml beside it.")
+    p.add_argument("--data", required=True, help="dataset directory")
+    p.add_argument("--pose", required=True, help="run directory of train-pose")
+    p.add_argument("--refiner", default=None, help="run directory of train-refiner")
+    p.add_argument("--iterations", type=int, default=None, help="refinement iterations (default: the refiner's, 2)")
+    p.add_argument("--masks", default="gt", help="gt or PRED_DIR of `sixdpose segment`")
+    p.add_argument("--score-thresh", dest="score_thresh", type=float, default=0.5, help="minimum score of a predicted mask")
+    p.add_argument("--icp", action="store_true", help="refine every pose with Open3D ICP (the hybrid stage's)")
+    p.add_argument("--colour-verify", dest="colour_verify", action="store_true",
+                   help="then run the hybrid stage's colour verification")
+    p.add_argument("--split", default="test", help="BOP split (ignored for the synthetic layout)")
+    p.add_argument("--limit", type=int, default=0, help="first N images only (0: all)")
+    p.add_argument("--out", required=True, help="results CSV to write")
+    p.add_argument("--threads", type=int, default=0, help="torch CPU threads")
+    p.add_argument("--device", default=None, help="cpu, cuda or auto")
+    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("-v", "--verbose", action="store_true", help="log every score-0 row's reason")
+    p.set_defaults(func=_cmd_predict)

@@ -1,0 +1,246 @@
+"""Typed configuration of the learned pose stage (paper section IV-C), with named profiles.
+
+Profiles (``PROFILES`` for the main network, ``REFINER_PROFILES`` for the refiner):
+
+``paper``
+    Section IV-C at full scale (GPU): full 640x480 image through the PSPNet/ResNet-18 (``crop = 0``),
+    width 1 (the 1408-channel fusion), up to 500 sampled pixels and 500 model points, Adam 1e-4 with
+    an exponential warm-up over 1,000 steps and the learning rate multiplied by 0.6 every 5 epochs,
+    100 epochs, uniform RGB noise of +-0.3 (on [0, 1] colours) in training. Refiner: Adam 1e-3, x0.6
+    every 10 epochs, 100 epochs, 2 unrolled iterations.
+
+``cpu``
+    The best this 2-core CPU machine can do in at most 2 hours for both networks together on a
+    generated ``train`` split: 64x64 crops around each mask's box, width 0.25, 256 points, a time
+    budget of 80 min (main net) and 35 min (refiner).
+
+``smoke``
+    Continuous integration: 32x32 crops, width 1/16, 64 points, 64 model points, the first 4 images
+    visited 4 times per epoch, 120 epochs at lr 1e-2 (x0.3 after 60); overfits a handful of instances
+    (rotations within ~60 degrees of the identity: ADD regression from scratch needs far longer to
+    escape the local minima of large rotations) in about 30 s on one core.
+
+Refiner training noise (documented here, the paper gives no values): the main network's pose is
+perturbed by a rotation about a uniformly random axis by an angle drawn from N(0, ``noise_rot_deg``)
+degrees and a translation offset drawn from N(0, ``noise_trans``) metres per axis.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..config import Config, from_profile
+
+TRANSLATIONS = ("absolute", "centroid_offset")
+ROTATIONS = ("quaternion", "6d")
+NORMS = ("none", "group", "batch")
+
+
+def _coerce_numbers(c) -> None:
+    """Cast str values of float/int fields to numbers: ``Config.load`` reads JSON through YAML 1.1,
+    which takes ``1e-06`` (as JSON writes small floats) for a string."""
+    import dataclasses
+
+    for f in dataclasses.fields(c):
+        v = getattr(c, f.name)
+        if isinstance(v, str) and f.type in ("float", "int", float, int):
+            try:
+                object.__setattr__(c, f.name, (float if f.type in ("float", float) else int)(v))
+            except ValueError:
+                raise ValueError(f"{f.name} must be a number, got {v!r}") from None
+
+
+def _common_checks(c) -> None:
+    _coerce_numbers(c)
+    if c.epochs < 1:
+        raise ValueError(f"epochs must be >= 1, got {c.epochs}")
+    if c.batch_size < 1:
+        raise ValueError(f"batch_size must be >= 1, got {c.batch_size}")
+    if not c.lr > 0:
+        raise ValueError(f"lr must be > 0, got {c.lr}")
+    if c.lr_step_epochs < 1 or not 0 < c.lr_gamma <= 1:
+        raise ValueError("lr_step_epochs must be >= 1 and lr_gamma in (0, 1]")
+    if c.num_points < 1 or c.num_model_points < 1:
+        raise ValueError("num_points and num_model_points must be >= 1")
+    if c.repeat < 1:
+        raise ValueError(f"repeat must be >= 1, got {c.repeat}")
+    if c.time_budget < 0:
+        raise ValueError(f"time_budget must be >= 0 (0: none), got {c.time_budget}")
+    if c.max_images < 0:
+        raise ValueError(f"max_images must be >= 0 (0: all), got {c.max_images}")
+
+
+@dataclass(frozen=True)
+class PoseConfig(Config):
+    """Every setting of a main pose network run (see the module docstring for the profiles).
+
+    Model:
+        width: channel multiplier of every layer (1 = the paper: 1408-channel fusion, PSP to 1024).
+        emb_dim: per-pixel colour embedding size of the PSPNet (32).
+        crop: 0 = the full image through the CNN (the paper); N > 0 = a square crop around each mask's
+            box (enlarged by ``crop_margin``), resized to N x N pixels (a multiple of 8), as DenseFusion.
+        crop_margin: relative enlargement of the mask box before cropping (0.1 = 10 % per side).
+        translation: ``absolute`` (camera-frame translation, the paper) or ``centroid_offset``
+            (an offset from the masked cloud's centroid; the cloud is centred before the point net).
+        rotation: ``quaternion`` (normalised, the paper) or ``6d`` (Zhou et al. 2019, Gram-Schmidt).
+        norm: ``none`` (the paper: no normalisation layers), ``group`` (GroupNorm) or ``batch``
+            (BatchNorm) after every convolution of the CNN and the point branches.
+
+    Data:
+        num_points: masked pixels with valid depth sampled per instance (fewer: wrapped repeats).
+        num_model_points: model points of the loss (a fresh random subset every step).
+        min_points: instances with fewer valid depth pixels are skipped in training and get a
+            score-0 row at inference.
+        rgb_noise: uniform per-pixel noise amplitude added to [0, 1] colours in training (0: none).
+        max_images: train on the first N images only (0: all; the smoke profile uses a handful).
+        repeat: each image is visited ``repeat`` times per epoch.
+        num_workers: data-loading worker processes.
+
+    Optimisation:
+        epochs, batch_size (images per step and process; every instance of each image is in the
+        step), lr (Adam), warmup_steps (exponential warm-up from lr/1000 to lr; 0: none),
+        lr_step_epochs and lr_gamma (learning rate x lr_gamma every lr_step_epochs epochs, i.e. a
+        per-epoch StepLR), weight_decay, grad_clip (max gradient norm, 0: off), amp (mixed precision,
+        CUDA only), time_budget (seconds; 0 = none: training stops cleanly after the epoch that
+        exceeds it).
+
+    Misc:
+        profile: the profile the config came from. seed: initialisation, shuffling and sampling.
+        num_threads: torch CPU threads (0: torch default). log_every: steps between metrics rows.
+    """
+
+    profile: str = "paper"
+    width: float = 1.0
+    emb_dim: int = 32
+    crop: int = 0
+    crop_margin: float = 0.1
+    translation: str = "absolute"
+    rotation: str = "quaternion"
+    norm: str = "none"
+    num_points: int = 500
+    num_model_points: int = 500
+    min_points: int = 10
+    rgb_noise: float = 0.3
+    max_images: int = 0
+    repeat: int = 1
+    num_workers: int = 2
+    epochs: int = 100
+    batch_size: int = 8
+    lr: float = 1e-4
+    warmup_steps: int = 1000
+    lr_step_epochs: int = 5
+    lr_gamma: float = 0.6
+    weight_decay: float = 0.0
+    grad_clip: float = 0.0
+    amp: bool = True
+    time_budget: float = 0.0
+    seed: int = 0
+    num_threads: int = 0
+    log_every: int = 10
+
+    def validate(self) -> None:
+        """Check every field (ValueError naming the field)."""
+        _common_checks(self)
+        if not self.width > 0:
+            raise ValueError(f"width must be > 0, got {self.width}")
+        if self.crop < 0 or self.crop % 8:
+            raise ValueError(f"crop must be 0 or a positive multiple of 8, got {self.crop}")
+        if self.translation not in TRANSLATIONS:
+            raise ValueError(f"translation must be one of {TRANSLATIONS}, got {self.translation!r}")
+        if self.rotation not in ROTATIONS:
+            raise ValueError(f"rotation must be one of {ROTATIONS}, got {self.rotation!r}")
+        if self.norm not in NORMS:
+            raise ValueError(f"norm must be one of {NORMS}, got {self.norm!r}")
+        if self.emb_dim < 1 or self.min_points < 1 or self.warmup_steps < 0 or self.rgb_noise < 0:
+            raise ValueError("emb_dim, min_points must be >= 1; warmup_steps, rgb_noise >= 0")
+
+    def arch(self) -> dict:
+        """The fields that define the network's shapes (checked when loading weights)."""
+        return {k: getattr(self, k) for k in ("width", "emb_dim", "crop", "translation", "rotation", "norm")}
+
+
+@dataclass(frozen=True)
+class RefinerConfig(Config):
+    """Every setting of an iterative-refiner run (trained on a finished main network's poses).
+
+    Model:
+        width: channel multiplier (1 = DenseFusion's 384->512->1024, heads 1024->512->128).
+        iterations: refinement iterations unrolled in training (loss on the final pose) and the
+            default at inference (the paper: 2).
+    Noise (added to the main net's poses in training; see the module docstring):
+        noise_rot_deg: std of the rotation angle (degrees) about a random axis.
+        noise_trans: std of the translation offset per axis (metres).
+    Data and optimisation: num_points, num_model_points, min_points, max_images, repeat,
+        num_workers, epochs, batch_size, lr, warmup_steps, lr_step_epochs, lr_gamma, weight_decay,
+        grad_clip, amp, time_budget as in :class:`PoseConfig`.
+    Misc: profile, seed, num_threads, log_every as in :class:`PoseConfig`.
+    """
+
+    profile: str = "paper"
+    width: float = 1.0
+    iterations: int = 2
+    noise_rot_deg: float = 15.0
+    noise_trans: float = 0.02
+    num_points: int = 500
+    num_model_points: int = 500
+    min_points: int = 10
+    max_images: int = 0
+    repeat: int = 1
+    num_workers: int = 2
+    epochs: int = 100
+    batch_size: int = 8
+    lr: float = 1e-3
+    warmup_steps: int = 0
+    lr_step_epochs: int = 10
+    lr_gamma: float = 0.6
+    weight_decay: float = 0.0
+    grad_clip: float = 0.0
+    amp: bool = True
+    time_budget: float = 0.0
+    seed: int = 0
+    num_threads: int = 0
+    log_every: int = 10
+
+    def validate(self) -> None:
+        """Check every field (ValueError naming the field)."""
+        _common_checks(self)
+        if not self.width > 0:
+            raise ValueError(f"width must be > 0, got {self.width}")
+        if self.iterations < 1:
+            raise ValueError(f"iterations must be >= 1, got {self.iterations}")
+        if self.noise_rot_deg < 0 or self.noise_trans < 0:
+            raise ValueError("noise_rot_deg and noise_trans must be >= 0")
+
+    def arch(self) -> dict:
+        """The fields that define the refiner's shapes."""
+        return {"width": self.width}
+
+
+PROFILES: dict[str, PoseConfig] = {
+    "paper": PoseConfig(),
+    "cpu": PoseConfig(profile="cpu", width=0.25, crop=64, num_points=256, num_model_points=256, rgb_noise=0.1,
+                      epochs=40, batch_size=4, lr=1e-3, warmup_steps=200, lr_step_epochs=8, lr_gamma=0.6,
+                      amp=False, time_budget=80 * 60.0, num_workers=1, num_threads=2),
+    "smoke": PoseConfig(profile="smoke", width=1 / 16, crop=32, num_points=64, num_model_points=64, rgb_noise=0.0,
+                        max_images=4, repeat=4, epochs=120, batch_size=4, lr=1e-2, warmup_steps=0,
+                        lr_step_epochs=60, lr_gamma=0.3, amp=False, num_workers=0, num_threads=1, log_every=5),
+}
+
+REFINER_PROFILES: dict[str, RefinerConfig] = {
+    "paper": RefinerConfig(),
+    "cpu": RefinerConfig(profile="cpu", width=0.25, num_points=256, num_model_points=256, epochs=20, batch_size=4,
+                         lr=1e-3, lr_step_epochs=6, amp=False, time_budget=35 * 60.0, num_workers=1, num_threads=2),
+    "smoke": RefinerConfig(profile="smoke", width=1 / 16, num_points=64, num_model_points=64, max_images=4, repeat=4,
+                           epochs=3, batch_size=2, lr=1e-3, lr_step_epochs=100, amp=False, num_workers=0,
+                           num_threads=1, log_every=5),
+}
+
+
+def profile_config(name: str, overrides: dict | None = None) -> PoseConfig:
+    """The main network's named profile with ``overrides`` applied (ConfigError if invalid)."""
+    return from_profile(PROFILES, name, overrides)
+
+
+def refiner_profile_config(name: str, overrides: dict | None = None) -> RefinerConfig:
+    """The refiner's named profile with ``overrides`` applied (ConfigError if invalid)."""
+    return from_profile(REFINER_PROFILES, name, overrides)

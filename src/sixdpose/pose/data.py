@@ -1,0 +1,250 @@
+"""Instance inputs of the learned stage: masked pixels with valid depth, sampled points, crops.
+
+One instance = one mask in one image (ground-truth or predicted); several instances of the same
+object in an image are separate samples. Every function works on a :class:`~sixdpose.datasets.base.Sample`
+and plain arrays; randomness comes from an explicit ``numpy.random.Generator`` (deterministic per
+epoch and item, so a resumed run is exact).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from ..datasets.geometry import backproject
+from ..errors import SixdposeError
+
+#: ImageNet statistics used to normalise [0, 1] colours before the CNN.
+MEAN = np.array([0.485, 0.456, 0.406], dtype=np.float32)
+STD = np.array([0.229, 0.224, 0.225], dtype=np.float32)
+
+
+class PoseError(SixdposeError):
+    """Bad input to the learned pose stage (no usable instances, unknown classes, ...)."""
+
+
+@dataclass
+class InstanceInput:
+    """The network input of one instance.
+
+    Attributes:
+        obj_id: object id. index: position of the instance in ``Sample.instances`` or the detection
+            list. score: detection score (1.0 for ground-truth masks).
+        image: (S, S, 3) uint8 crop (crop mode) or None (full-image mode: the frame's image is used).
+        choose: (P,) int64 flat pixel indices into the crop / full image of the sampled points.
+        cloud: (P, 3) float32 sampled camera-frame points, metres (wrapped repeats when fewer than P).
+        points, colors: (n, 3) float64 every masked valid point (metres) and its colour in [0, 1]
+            (for ICP / colour verification; only kept when asked).
+        R, t: ground-truth pose ``X_CO`` (metres) when known, else None.
+    """
+
+    obj_id: int
+    index: int
+    score: float
+    image: np.ndarray | None
+    choose: np.ndarray
+    cloud: np.ndarray
+    points: np.ndarray | None = None
+    colors: np.ndarray | None = None
+    R: np.ndarray | None = None
+    t: np.ndarray | None = None
+    n_valid: int = 0
+
+
+@dataclass
+class Frame:
+    """The instances of one image: ``image`` (H, W, 3) uint8 in full-image mode (None in crop mode)."""
+
+    image: np.ndarray | None
+    instances: list[InstanceInput] = field(default_factory=list)
+
+
+def crop_window(mask: np.ndarray, margin: float) -> tuple[float, float, float]:
+    """Square window around a mask's box: ``(y0, x0, side)`` in pixels (side >= 8), enlarged by ``margin`` per side."""
+    v, u = np.nonzero(mask)
+    v0, v1, u0, u1 = v.min(), v.max() + 1, u.min(), u.max() + 1
+    side = max(float(max(v1 - v0, u1 - u0)) * (1.0 + 2.0 * margin), 8.0)
+    cy, cx = (v0 + v1) / 2.0, (u0 + u1) / 2.0
+    return cy - side / 2.0, cx - side / 2.0, side
+
+
+def crop_image(rgb: np.ndarray, y0: float, x0: float, side: float, size: int) -> np.ndarray:
+    """Nearest-neighbour crop of ``rgb`` (H, W, 3) over the square window, resized to (size, size, 3); black outside."""
+    H, W = rgb.shape[:2]
+    rows = np.floor(y0 + (np.arange(size) + 0.5) * side / size).astype(np.int64)
+    cols = np.floor(x0 + (np.arange(size) + 0.5) * side / size).astype(np.int64)
+    okr, okc = (rows >= 0) & (rows < H), (cols >= 0) & (cols < W)
+    out = rgb[rows.clip(0, H - 1)[:, None], cols.clip(0, W - 1)[None, :], :3].copy()
+    out[~okr] = 0
+    out[:, ~okc] = 0
+    return out
+
+
+def extract_instance(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, mask: np.ndarray, obj_id: int, *,
+                     crop: int, margin: float, num_points: int, min_points: int, rng: np.random.Generator,
+                     index: int = 0, score: float = 1.0, keep_points: bool = False) -> InstanceInput | str:
+    """Build the input of one instance, or return the reason it is unusable.
+
+    Args:
+        rgb: (H, W, 3) uint8. depth: (H, W) metres (0 / NaN / inf: invalid, ignored). K: (3, 3).
+        mask: (H, W) bool. crop: 0 (full image) or the crop size in pixels. margin: crop enlargement.
+        num_points: points sampled (without replacement when enough, else wrapped repeats).
+        min_points: fewer valid depth pixels under the mask -> the reason string.
+        rng: numpy generator. keep_points: keep every masked point and colour (ICP / colour check).
+    Returns:
+        :class:`InstanceInput` or a reason string such as ``"3 valid depth pixels under the mask (< 10)"``.
+    """
+    mask = np.asarray(mask, dtype=bool)
+    pts, col, pix = backproject(depth, K, mask, rgb if keep_points else None)
+    n = len(pts)
+    if n < min_points:
+        return f"{n} valid depth pixel(s) under the mask (< {min_points})"
+    sel = rng.permutation(n)[:num_points] if n > num_points else np.resize(rng.permutation(n), num_points)
+    v, u = pix[sel, 0], pix[sel, 1]
+    if crop:
+        y0, x0, side = crop_window(mask, margin)
+        image = crop_image(rgb, y0, x0, side, crop)
+        i = np.clip(np.floor((v + 0.5 - y0) * crop / side), 0, crop - 1).astype(np.int64)
+        j = np.clip(np.floor((u + 0.5 - x0) * crop / side), 0, crop - 1).astype(np.int64)
+        choose = i * crop + j
+    else:
+        image, choose = None, (v * depth.shape[1] + u).astype(np.int64)
+    return InstanceInput(int(obj_id), int(index), float(score), image, choose, pts[sel].astype(np.float32),
+                         pts if keep_points else None, col if keep_points else None, n_valid=n)
+
+
+def normalise_images(images: np.ndarray, noise: float = 0.0, rng: np.random.Generator | None = None) -> torch.Tensor:
+    """(B, H, W, 3) uint8 -> (B, 3, H, W) float32 normalised (ImageNet mean/std), optional uniform noise.
+
+    ``noise`` > 0 adds U(-noise, noise) per pixel and channel to the [0, 1] colours (clipped) first.
+    """
+    x = images.astype(np.float32) / 255.0
+    if noise > 0:
+        x = np.clip(x + rng.uniform(-noise, noise, size=x.shape).astype(np.float32), 0.0, 1.0)
+    x = (x - MEAN) / STD
+    return torch.from_numpy(np.ascontiguousarray(x.transpose(0, 3, 1, 2)))
+
+
+def collate_frames(frames: list[Frame], class_index: dict[int, int], noise: float = 0.0,
+                   rng: np.random.Generator | None = None) -> dict:
+    """Batch the instances of several frames for one forward pass.
+
+    Crop mode: one image per instance. Full-image mode: one image per frame (its instances share the
+    CNN pass). Returns a dict of CPU tensors: ``images`` (B, 3, H, W), ``img_index`` (N,),
+    ``choose`` (N, P), ``cloud`` (N, P, 3), ``obj_index`` (N,), and ``R`` (N, 3, 3) / ``t`` (N, 3)
+    float32 when every instance has ground truth; ``instances``: the :class:`InstanceInput` list.
+    """
+    insts = [i for f in frames for i in f.instances]
+    if not insts:
+        return {"instances": []}
+    if insts[0].image is not None:
+        imgs = np.stack([i.image for i in insts])
+        img_index = np.arange(len(insts))
+    else:
+        keep = [f for f in frames if f.instances]
+        imgs = np.stack([f.image[..., :3] for f in keep])
+        img_index = np.concatenate([np.full(len(f.instances), k) for k, f in enumerate(keep)])
+    out = {
+        "images": normalise_images(imgs, noise, rng),
+        "img_index": torch.from_numpy(img_index.astype(np.int64)),
+        "choose": torch.from_numpy(np.stack([i.choose for i in insts])),
+        "cloud": torch.from_numpy(np.stack([i.cloud for i in insts])),
+        "obj_index": torch.tensor([class_index[i.obj_id] for i in insts], dtype=torch.long),
+        "instances": insts,
+    }
+    if all(i.R is not None for i in insts):
+        out["R"] = torch.from_numpy(np.stack([i.R for i in insts]).astype(np.float32))
+        out["t"] = torch.from_numpy(np.stack([i.t for i in insts]).astype(np.float32))
+    return out
+
+
+def sample_model_points(model_points: dict[int, np.ndarray], obj_ids, m: int, rng: np.random.Generator) -> torch.Tensor:
+    """A fresh random subset of ``m`` model points per instance: (N, m, 3) float32 (object frame, metres)."""
+    out = []
+    for oid in obj_ids:
+        P = model_points[oid]
+        sel = rng.choice(len(P), m, replace=len(P) < m)
+        out.append(P[sel])
+    return torch.from_numpy(np.stack(out).astype(np.float32))
+
+
+def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two boolean masks."""
+    inter = np.logical_and(a, b).sum()
+    union = np.logical_or(a, b).sum()
+    return float(inter / union) if union else 0.0
+
+
+def training_masks(sample, detections=None, iou_min: float = 0.5) -> list[tuple[int, np.ndarray, int]]:
+    """Masks to train on, as ``(index into sample.instances, mask, obj_id)``.
+
+    ``detections`` None: the ground-truth masks. Otherwise each predicted mask is matched (greedy, by
+    decreasing score) to the unmatched ground-truth instance of the same object with the highest IoU
+    >= ``iou_min``; it keeps that instance's pose as the target.
+    """
+    if detections is None:
+        return [(k, g.mask, g.obj_id) for k, g in enumerate(sample.instances) if g.mask is not None]
+    used, out = set(), []
+    for d in detections:
+        best, bk = iou_min, None
+        for k, g in enumerate(sample.instances):
+            if k in used or g.obj_id != d.obj_id or g.mask is None:
+                continue
+            iou = mask_iou(d.mask, g.mask)
+            if iou >= best:
+                best, bk = iou, k
+        if bk is not None:
+            used.add(bk)
+            out.append((bk, d.mask, d.obj_id))
+    return out
+
+
+class FrameDataset(torch.utils.data.Dataset):
+    """Training frames: item ``i`` = the usable instances of image ``keys[i]`` with their targets.
+
+    Args:
+        reader: a DatasetReader. keys: image keys (repeats allowed). cfg: a PoseConfig or RefinerConfig
+            (``num_points``, ``min_points``; ``crop``/``crop_margin`` come from ``crop``, ``margin``).
+        class_index: obj_id -> class index (others are skipped). crop, margin: crop settings of the
+            main network. masks: ``"gt"`` or a prediction directory. seed: base seed.
+    """
+
+    def __init__(self, reader, keys, cfg, class_index, crop: int, margin: float, masks: str = "gt", seed: int = 0):
+        self.reader, self.keys, self.cfg, self.class_index = reader, list(keys), cfg, class_index
+        self.crop, self.margin, self.masks, self.seed = crop, margin, masks, seed
+        self.epoch = 0
+
+    def set_epoch(self, epoch: int) -> None:
+        """Select the epoch (seeds the per-item sampling)."""
+        self.epoch = epoch
+
+    def __len__(self):
+        return len(self.keys)
+
+    def __getitem__(self, i: int) -> Frame:
+        rng = np.random.default_rng([self.seed, self.epoch, i])
+        key = self.keys[i]
+        s = self.reader.load(key)
+        dets = None
+        if self.masks != "gt":
+            from ..artifacts.predictions import read_predictions
+
+            dets = read_predictions(self.masks, *key)
+        frame = Frame(None if self.crop else s.rgb)
+        for k, mask, oid in training_masks(s, dets):
+            if oid not in self.class_index:
+                continue
+            inst = extract_instance(s.rgb, s.depth, s.K, mask, oid, crop=self.crop, margin=self.margin,
+                                    num_points=self.cfg.num_points, min_points=self.cfg.min_points, rng=rng, index=k)
+            if isinstance(inst, str):
+                continue
+            inst.R, inst.t = s.instances[k].R, s.instances[k].t
+            frame.instances.append(inst)
+        return frame
+
+
+def collate_list(batch):
+    """``collate_fn`` keeping frames as a list."""
+    return list(batch)

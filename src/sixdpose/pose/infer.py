@@ -1,0 +1,251 @@
+"""Inference of the learned stage: batched pose prediction for every instance of a frame.
+
+:class:`Estimator` loads a main-network run (and optionally a refiner run), and turns one
+:class:`~sixdpose.datasets.base.Sample` (with ground-truth or predicted masks) into
+:class:`~sixdpose.artifacts.poses.PoseEstimate` rows: all usable instances of the frame go through one
+batched forward pass (one CNN pass over the image, or over the batch of crops), then ``iterations``
+refinement steps, then optionally Open3D ICP (the hybrid stage's ``refine_icp`` with the ``default``
+registration preset) and/or the hybrid stage's colour verification (``colour_search``). Unusable
+instances (too few valid depth pixels, an object id the checkpoint has no class for) get score-0
+rows with the reason. ``time`` covers everything but disk reads (paper section V-A).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..artifacts.poses import PoseEstimate
+from . import checkpoint as ck
+from .config import PoseConfig, RefinerConfig
+from .data import Frame, PoseError, collate_frames, extract_instance
+from .geometry import compose_refinement, to_object_frame
+from .model import build_posenet, build_refiner
+
+log = logging.getLogger("sixdpose.pose")
+
+
+def load_posenet(ckpt: dict, device="cpu"):
+    """``(PoseNet in eval mode, PoseConfig)`` of a validated ``pose`` checkpoint dict."""
+    cfg = PoseConfig.from_dict(ckpt["config"])
+    net = build_posenet(cfg, len(ckpt["classes"]))
+    try:
+        net.load_state_dict(ckpt["model"])
+    except (RuntimeError, KeyError) as e:
+        raise ck.CheckpointError(f"{ckpt['path']}: weights do not fit the saved architecture ({str(e).splitlines()[0][:200]})") from None
+    return net.to(device).eval(), cfg
+
+
+def load_refiner(ckpt: dict, pose_ckpt: dict, device="cpu"):
+    """``(Refiner in eval mode, RefinerConfig)`` of a ``refiner`` checkpoint trained on ``pose_ckpt``'s network."""
+    ck.check_refiner_matches(ckpt, pose_ckpt)
+    cfg = RefinerConfig.from_dict(ckpt["config"])
+    net = build_refiner(cfg, len(ckpt["classes"]), int(pose_ckpt["arch"]["emb_dim"]))
+    try:
+        net.load_state_dict(ckpt["model"])
+    except (RuntimeError, KeyError) as e:
+        raise ck.CheckpointError(f"{ckpt['path']}: weights do not fit the saved architecture ({str(e).splitlines()[0][:200]})") from None
+    return net.to(device).eval(), cfg
+
+
+def run_networks(posenet, refiner, batch: dict, iterations: int, device, amp: bool = False):
+    """Forward a collated batch through the main network and ``iterations`` refiner steps.
+
+    Args:
+        posenet: PoseNet. refiner: Refiner or None. batch: :func:`~sixdpose.pose.data.collate_frames`
+            output. iterations: refinement steps (ignored without a refiner). amp: autocast on CUDA.
+    Returns:
+        ``(R (N, 3, 3), t (N, 3))`` float64 numpy, ``X_CO`` in metres.
+    """
+    with torch.no_grad(), torch.autocast("cuda", dtype=torch.float16, enabled=amp and torch.device(device).type == "cuda"):
+        cloud = batch["cloud"].to(device)
+        obj = batch["obj_index"].to(device)
+        out = posenet(batch["images"].to(device), batch["img_index"].to(device), batch["choose"].to(device), cloud, obj)
+        R, t = out["R"].float(), out["t"].float()
+        if refiner is not None:
+            emb = out["emb"].float()
+            for _ in range(iterations):
+                R_r, t_r = refiner(to_object_frame(cloud, R, t), emb, obj)
+                R, t = compose_refinement(R, t, R_r.float(), t_r.float())
+    return R.cpu().double().numpy(), t.cpu().double().numpy()
+
+
+def _orthonormalise(R: np.ndarray) -> np.ndarray:
+    U, _, Vt = np.linalg.svd(R)
+    D = np.eye(3)
+    D[2, 2] = np.sign(np.linalg.det(U @ Vt))
+    return U @ D @ Vt
+
+
+class Estimator:
+    """Learned 6D pose estimator for one frame at a time (see the module docstring).
+
+    Args:
+        pose: main-network run directory or checkpoint file. refiner: refiner run/checkpoint or None.
+        iterations: refinement iterations (default: the refiner's training value; 0 = none).
+        device: ``cpu``/``cuda``/None (GPU when present). icp: refine each pose with Open3D ICP.
+        colour_verify: run the hybrid stage's colour verification on each pose.
+        reader: the dataset reader (its models are needed by ``icp`` / ``colour_verify``).
+        score_thresh: predicted masks below this score are ignored. seed: point-sampling seed.
+        max_batch: most instances per forward pass (crop mode).
+    Raises:
+        CheckpointError: corrupt/incompatible checkpoints, or a refiner of another pose run.
+    """
+
+    def __init__(self, pose, refiner=None, *, iterations: int | None = None, device: str | None = None, icp: bool = False,
+                 colour_verify: bool = False, reader=None, score_thresh: float = 0.5, seed: int = 0, max_batch: int = 64):
+        self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
+        self.pose_ckpt = ck.load(pose, kind="pose")
+        self.net, self.cfg = load_posenet(self.pose_ckpt, self.device)
+        self.classes = ck.classes_of(self.pose_ckpt)
+        self.class_index = {oid: k for k, (oid, _, _) in enumerate(self.classes)}
+        self.refiner, self.refiner_cfg = None, None
+        if refiner is not None:
+            self.refiner_ckpt = ck.load(refiner, kind="refiner")
+            self.refiner, self.refiner_cfg = load_refiner(self.refiner_ckpt, self.pose_ckpt, self.device)
+        self.iterations = (self.refiner_cfg.iterations if self.refiner_cfg else 0) if iterations is None else int(iterations)
+        if self.iterations < 0:
+            raise PoseError(f"iterations must be >= 0, got {self.iterations}")
+        if self.iterations and self.refiner is None:
+            raise PoseError(f"--iterations {self.iterations} needs a refiner run (--refiner)")
+        self.icp, self.colour_verify, self.reader = icp, colour_verify, reader
+        self.score_thresh, self.seed, self.max_batch = score_thresh, seed, max_batch
+        self._cache = None
+        if icp or colour_verify:
+            if reader is None:
+                raise PoseError("ICP and colour verification need the dataset reader (its object models)")
+            from ..registration.geometry import ReferenceCache
+            from ..registration.presets import get_preset
+
+            self.reg_cfg = get_preset("default")
+            self._cache = ReferenceCache(reader)
+
+    def settings(self) -> dict:
+        """What produced the estimates (for the ``.config.yml`` beside a results CSV)."""
+        return {
+            "pose_run": self.pose_ckpt["path"], "pose_config": self.cfg.to_dict(),
+            "refiner_run": self.refiner_ckpt["path"] if self.refiner is not None else None,
+            "refiner_config": self.refiner_cfg.to_dict() if self.refiner_cfg else None,
+            "iterations": self.iterations, "icp": self.icp, "colour_verify": self.colour_verify,
+            "score_thresh": self.score_thresh, "seed": self.seed, "device": str(self.device),
+        }
+
+    def predict(self, sample, detections=None) -> list[PoseEstimate]:
+        """Estimate the pose of every instance of one frame.
+
+        Args:
+            sample: a Sample with rgb and depth (and instance masks when ``detections`` is None).
+            detections: predicted :class:`~sixdpose.artifacts.predictions.Detection` list, or None
+                for the ground-truth masks.
+        Returns:
+            one :class:`PoseEstimate` per instance/detection (score-0 rows with a ``reason`` for the
+            unusable ones), all with the frame's total ``time`` in seconds.
+        Raises:
+            PoseError: the sample lacks rgb/depth, or GT masks are asked for and it has none.
+        """
+        t0 = time.perf_counter()
+        if sample.rgb is None or sample.depth is None:
+            raise PoseError(f"scene {sample.scene_id} image {sample.im_id}: the learned stage needs rgb and depth")
+        if detections is None:
+            if any(g.mask is None for g in sample.instances):
+                raise PoseError(f"scene {sample.scene_id} image {sample.im_id}: no ground-truth masks; use predicted masks (--masks PRED_DIR)")
+            items = [(g.obj_id, 1.0, g.mask) for g in sample.instances]
+        else:
+            items = [(d.obj_id, d.score, d.mask) for d in detections if d.score >= self.score_thresh]
+        rng = np.random.default_rng([self.seed, int(sample.scene_id), int(sample.im_id)])
+        keep_points = self.icp or self.colour_verify
+        rows: list[PoseEstimate | None] = [None] * len(items)
+        usable = []
+        for k, (oid, score, mask) in enumerate(items):
+            if oid not in self.class_index:
+                rows[k] = PoseEstimate.failed(sample.scene_id, sample.im_id, oid, f"object id {oid} is not a class of the pose run")
+                continue
+            if mask is None or np.shape(mask) != sample.depth.shape:
+                rows[k] = PoseEstimate.failed(sample.scene_id, sample.im_id, oid, "mask missing or of another size than the image")
+                continue
+            inst = extract_instance(sample.rgb, sample.depth, sample.K, mask, oid, crop=self.cfg.crop, margin=self.cfg.crop_margin,
+                                    num_points=self.cfg.num_points, min_points=self.cfg.min_points, rng=rng, index=k,
+                                    score=score, keep_points=keep_points)
+            if isinstance(inst, str):
+                rows[k] = PoseEstimate.failed(sample.scene_id, sample.im_id, oid, inst)
+            else:
+                usable.append(inst)
+        step = self.max_batch if self.cfg.crop else max(len(usable), 1)
+        for s in range(0, len(usable), step):
+            chunk = usable[s:s + step]
+            batch = collate_frames([Frame(None if self.cfg.crop else sample.rgb, chunk)], self.class_index)
+            R, t = run_networks(self.net, self.refiner, batch, self.iterations, self.device, amp=True)
+            for inst, Ri, ti in zip(chunk, R, t):
+                Ri = _orthonormalise(Ri)
+                Ri, ti = self._post(inst, Ri, ti)
+                rows[inst.index] = PoseEstimate(sample.scene_id, sample.im_id, inst.obj_id, inst.score, Ri, ti)
+        dt = time.perf_counter() - t0
+        for r in rows:
+            r.time = dt
+            if r.reason:
+                log.info("scene %d image %d obj %d: %s", r.scene_id, r.im_id, r.obj_id, r.reason)
+        return rows
+
+    def _post(self, inst, R, t):
+        """Optional ICP and colour verification of one pose (hybrid stage code, ``default`` preset)."""
+        if not (self.icp or self.colour_verify):
+            return R, t
+        from ..registration.methods import get_reference, prepare_scene, refine_icp
+
+        X = np.eye(4)
+        X[:3, :3], X[:3, 3] = R, t
+        ref, _ = get_reference(self._cache, inst.obj_id, "icp", self.reg_cfg)
+        scene = prepare_scene(inst.points, ref.diameter, self.reg_cfg, features=False)
+        if self.icp and len(scene.points) >= 3:
+            X = refine_icp(scene, ref, X, self.reg_cfg).X_CO
+        if self.colour_verify and inst.colors is not None:
+            from ..registration.verify import colour_search
+
+            grid, _ = self._cache.colour_grid(inst.obj_id, self.reg_cfg.cv_grid_cells, self.reg_cfg.cv_smooth_rel)
+            if grid is not None:
+                res = colour_search(X, inst.points, inst.colors, grid, ref.diameter, self.reg_cfg)
+                if res.changed:
+                    X = res.X_CO
+                    if self.icp and len(scene.points) >= 3:
+                        X = refine_icp(scene, ref, X, self.reg_cfg).X_CO
+        return X[:3, :3], X[:3, 3]
+
+
+def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: int | None = None, icp: bool = False,
+                    colour_verify: bool = False, device: str | None = None, split: str = "test", limit: int = 0,
+                    score_thresh: float = 0.5, progress: bool = False, estimator: Estimator | None = None) -> tuple[list[PoseEstimate], Estimator]:
+    """Estimate poses on every image of a dataset (disk reads are not timed).
+
+    Args:
+        data: a DatasetReader or a dataset path. pose, refiner, iterations, icp, colour_verify, device,
+            score_thresh: see :class:`Estimator`. masks: ``"gt"`` or a prediction directory of
+            ``sixdpose segment``. split: BOP split. limit: first N images only (0: all).
+    Returns:
+        ``(estimates, estimator)``.
+    Raises:
+        PredictionError (a corrupt prediction file, named), CheckpointError, PoseError, DatasetError.
+    """
+    from ..datasets.base import as_reader
+
+    reader = as_reader(data, split=split)
+    est = estimator or Estimator(pose, refiner, iterations=iterations, device=device, icp=icp, colour_verify=colour_verify,
+                                 reader=reader, score_thresh=score_thresh)
+    if masks != "gt" and not Path(masks).is_dir():
+        raise PoseError(f"{masks}: prediction directory not found (use --masks gt for ground-truth masks)")
+    keys = reader.keys()[:limit] if limit else reader.keys()
+    out: list[PoseEstimate] = []
+    from tqdm.auto import tqdm
+
+    for key in tqdm(keys, desc="predict-pose", unit="img", disable=not progress):
+        sample = reader.load(key, masks=masks == "gt")
+        dets = None
+        if masks != "gt":
+            from ..artifacts.predictions import read_predictions
+
+            dets = read_predictions(masks, *key)
+        out.extend(est.predict(sample, dets))
+    return out, est

@@ -1,0 +1,283 @@
+"""The networks of the learned stage (paper section IV-C, Fig. 5 and 6): PSPNet colour embedding,
+DenseFusion-like point fusion with attention pooling, and the iterative refiner.
+
+Shapes (``w`` = width multiplier, ``c(x) = max(1, round(x * w))``; ``w = 1`` is the paper):
+
+* :class:`PSPNet`: image (B, 3, H, W) (H, W multiples of 8) -> embedding (B, emb_dim=32, H, W).
+  ResNet-18 trunk (no pre-training) with layer3/layer4 dilated (2, 4; output stride 8), pyramid pooling
+  (1, 2, 3, 6) to 1024 channels, three x2 up-sampling blocks 1024 -> 256 -> 64 -> 64 (3x3 conv + PReLU),
+  1x1 conv to ``emb_dim``.
+* :class:`PoseNet`: cloud (N, P, 3) metres + per-point embedding (N, emb_dim, P) -> per point
+  geometry 3->64->128 and colour emb->64->128 (1x1 Conv1d + ReLU); [64+64] and [128+128] concatenated,
+  then 256->512->1024, averaged over points into a global feature repeated to every point:
+  128 + 256 + 1024 = 1408 per point. Rotation and translation heads 1408->640->256->128 each,
+  attention pooling (Linear(128, 1) score per point, softmax over points, weighted sum), then a
+  per-class linear output: rotation (quaternion 4 or 6D 6) and translation (3).
+* :class:`Refiner`: object-frame cloud (N, P, 3) + detached embedding (N, emb_dim, P): geometry
+  3->64->128, embedding emb->64->128, [64+64] and [128+128] concatenated (384) -> 512 -> 1024,
+  averaged; heads 1024->512->128 -> per-class quaternion and translation.
+
+``norm`` = ``none`` uses no normalisation layer anywhere (the paper); ``group``/``batch`` put one after
+every convolution of the CNN and the point branches (an ablation).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+
+from .geometry import quaternion_to_matrix, rotation_dim, rotation_from_output
+
+
+def _ch(x: int, width: float) -> int:
+    return max(1, int(round(x * width)))
+
+
+def norm2d(kind: str, ch: int) -> nn.Module:
+    """A 2D normalisation layer of ``kind`` (none | group | batch) for ``ch`` channels."""
+    if kind == "none":
+        return nn.Identity()
+    if kind == "group":
+        return nn.GroupNorm(math.gcd(ch, 8), ch)
+    if kind == "batch":
+        return nn.BatchNorm2d(ch)
+    raise ValueError(f"unknown norm {kind!r}")
+
+
+def norm1d(kind: str, ch: int) -> nn.Module:
+    """A normalisation layer for (N, C, P) point features (none | group | batch)."""
+    if kind == "none":
+        return nn.Identity()
+    if kind == "group":
+        return nn.GroupNorm(math.gcd(ch, 8), ch)
+    if kind == "batch":
+        return nn.BatchNorm1d(ch)
+    raise ValueError(f"unknown norm {kind!r}")
+
+
+class BasicBlock(nn.Module):
+    """ResNet basic block (two 3x3 convs) with optional dilation and normalisation."""
+
+    def __init__(self, cin: int, cout: int, stride: int = 1, dilation: int = 1, norm: str = "none"):
+        super().__init__()
+        self.conv1 = nn.Conv2d(cin, cout, 3, stride, padding=dilation, dilation=dilation, bias=norm == "none")
+        self.bn1 = norm2d(norm, cout)
+        self.conv2 = nn.Conv2d(cout, cout, 3, 1, padding=dilation, dilation=dilation, bias=norm == "none")
+        self.bn2 = norm2d(norm, cout)
+        self.down = None
+        if stride != 1 or cin != cout:
+            self.down = nn.Sequential(nn.Conv2d(cin, cout, 1, stride, bias=norm == "none"), norm2d(norm, cout))
+
+    def forward(self, x):  # noqa: D102
+        y = F.relu(self.bn1(self.conv1(x)))
+        y = self.bn2(self.conv2(y))
+        return F.relu(y + (x if self.down is None else self.down(x)))
+
+
+class ResNet18(nn.Module):
+    """ResNet-18 trunk, layer3/layer4 dilated (output stride 8); (B, 3, H, W) -> (B, c(512), H/8, W/8)."""
+
+    def __init__(self, width: float = 1.0, norm: str = "none"):
+        super().__init__()
+        c = [_ch(v, width) for v in (64, 128, 256, 512)]
+        self.stem = nn.Sequential(nn.Conv2d(3, c[0], 7, 2, 3, bias=norm == "none"), norm2d(norm, c[0]), nn.ReLU(inplace=True),
+                                  nn.MaxPool2d(3, 2, 1))
+        self.layer1 = nn.Sequential(BasicBlock(c[0], c[0], norm=norm), BasicBlock(c[0], c[0], norm=norm))
+        self.layer2 = nn.Sequential(BasicBlock(c[0], c[1], 2, norm=norm), BasicBlock(c[1], c[1], norm=norm))
+        self.layer3 = nn.Sequential(BasicBlock(c[1], c[2], 1, 2, norm), BasicBlock(c[2], c[2], 1, 2, norm))
+        self.layer4 = nn.Sequential(BasicBlock(c[2], c[3], 1, 4, norm), BasicBlock(c[3], c[3], 1, 4, norm))
+        self.out_channels = c[3]
+
+    def forward(self, x):  # noqa: D102
+        return self.layer4(self.layer3(self.layer2(self.layer1(self.stem(x)))))
+
+
+class PSPModule(nn.Module):
+    """Pyramid pooling (bins 1, 2, 3, 6; a 1x1 conv per bin as DenseFusion), bottleneck to ``cout`` + ReLU."""
+
+    def __init__(self, cin: int, cout: int, sizes=(1, 2, 3, 6), norm: str = "none"):
+        super().__init__()
+        self.sizes = tuple(sizes)
+        self.stages = nn.ModuleList([nn.Conv2d(cin, cin, 1, bias=False) for _ in sizes])
+        self.bottleneck = nn.Conv2d(cin * (len(sizes) + 1), cout, 1)
+        self.norm = norm2d(norm, cout)
+
+    def forward(self, x):  # noqa: D102
+        h, w = x.shape[-2:]
+        pri = [F.interpolate(conv(F.adaptive_avg_pool2d(x, s)), size=(h, w), mode="bilinear", align_corners=False)
+               for s, conv in zip(self.sizes, self.stages)]
+        return F.relu(self.norm(self.bottleneck(torch.cat(pri + [x], 1))))
+
+
+class PSPUpsample(nn.Module):
+    """x2 bilinear up-sampling, 3x3 conv, PReLU."""
+
+    def __init__(self, cin: int, cout: int, norm: str = "none"):
+        super().__init__()
+        self.conv = nn.Conv2d(cin, cout, 3, padding=1)
+        self.norm = norm2d(norm, cout)
+        self.act = nn.PReLU()
+
+    def forward(self, x):  # noqa: D102
+        x = F.interpolate(x, scale_factor=2, mode="bilinear", align_corners=False)
+        return self.act(self.norm(self.conv(x)))
+
+
+class PSPNet(nn.Module):
+    """Per-pixel colour embedding: (B, 3, H, W) normalised image -> (B, emb_dim, H, W); H, W multiples of 8."""
+
+    def __init__(self, width: float = 1.0, emb_dim: int = 32, norm: str = "none"):
+        super().__init__()
+        self.feats = ResNet18(width, norm)
+        c1024, c256, c64 = _ch(1024, width), _ch(256, width), _ch(64, width)
+        self.psp = PSPModule(self.feats.out_channels, c1024, norm=norm)
+        self.up1 = PSPUpsample(c1024, c256, norm)
+        self.up2 = PSPUpsample(c256, c64, norm)
+        self.up3 = PSPUpsample(c64, c64, norm)
+        self.final = nn.Conv2d(c64, emb_dim, 1)
+
+    def forward(self, x):  # noqa: D102
+        return self.final(self.up3(self.up2(self.up1(self.psp(self.feats(x))))))
+
+
+def _conv1d(cin, cout, norm):
+    return nn.Sequential(nn.Conv1d(cin, cout, 1), norm1d(norm, cout), nn.ReLU(inplace=True))
+
+
+class AttentionPool(nn.Module):
+    """Attention pooling over points: score = Linear(C, 1) per point, softmax over points, weighted sum.
+
+    forward(x (N, C, P)) -> (pooled (N, C), weights (N, P) summing to 1 over P).
+    """
+
+    def __init__(self, ch: int):
+        super().__init__()
+        self.score = nn.Linear(ch, 1)
+
+    def forward(self, x):  # noqa: D102
+        w = torch.softmax(self.score(x.transpose(1, 2))[..., 0], dim=1)
+        return torch.einsum("ncp,np->nc", x, w), w
+
+
+class PoseNet(nn.Module):
+    """The main network (see the module docstring).
+
+    Args:
+        num_classes: object classes (the per-class outputs). width, emb_dim, norm: as in
+            :class:`~sixdpose.pose.config.PoseConfig`. rotation: ``quaternion`` | ``6d``.
+            translation: ``absolute`` | ``centroid_offset``.
+    """
+
+    def __init__(self, num_classes: int, width: float = 1.0, emb_dim: int = 32, norm: str = "none",
+                 rotation: str = "quaternion", translation: str = "absolute"):
+        super().__init__()
+        self.num_classes, self.rotation, self.translation = num_classes, rotation, translation
+        self.cnn = PSPNet(width, emb_dim, norm)
+        c = lambda x: _ch(x, width)  # noqa: E731
+        self.conv1, self.conv2 = _conv1d(3, c(64), norm), _conv1d(c(64), c(128), norm)
+        self.e_conv1, self.e_conv2 = _conv1d(emb_dim, c(64), norm), _conv1d(c(64), c(128), norm)
+        self.conv5, self.conv6 = _conv1d(2 * c(128), c(512), norm), _conv1d(c(512), c(1024), norm)
+        self.fused_channels = 2 * c(64) + 2 * c(128) + c(1024)
+
+        def head():
+            return nn.Sequential(_conv1d(self.fused_channels, c(640), norm), _conv1d(c(640), c(256), norm),
+                                 _conv1d(c(256), c(128), norm))
+
+        self.head_r, self.head_t = head(), head()
+        self.att_r, self.att_t = AttentionPool(c(128)), AttentionPool(c(128))
+        self.out_r = nn.Linear(c(128), num_classes * rotation_dim(rotation))
+        self.out_t = nn.Linear(c(128), num_classes * 3)
+
+    def embed(self, images: torch.Tensor, img_index: torch.Tensor, choose: torch.Tensor) -> torch.Tensor:
+        """Per-point colour embeddings: one CNN pass over ``images``, gathered at the sampled pixels.
+
+        Args:
+            images: (B, 3, H, W) normalised images (full images or crops).
+            img_index: (N,) long, the image of each instance. choose: (N, P) long flat pixel indices.
+        Returns:
+            (N, emb_dim, P).
+        """
+        feat = self.cnn(images).flatten(2)  # (B, E, H*W)
+        feat = feat[img_index]  # (N, E, HW)
+        return torch.gather(feat, 2, choose[:, None, :].expand(-1, feat.shape[1], -1))
+
+    def fuse(self, cloud: torch.Tensor, emb: torch.Tensor) -> torch.Tensor:
+        """Dense fusion: cloud (N, P, 3) and embedding (N, E, P) -> (N, 1408*w, P) per-point features."""
+        x = cloud.transpose(1, 2)
+        x1, e1 = self.conv1(x), self.e_conv1(emb)
+        x2, e2 = self.conv2(x1), self.e_conv2(e1)
+        pf1, pf2 = torch.cat([x1, e1], 1), torch.cat([x2, e2], 1)
+        g = self.conv6(self.conv5(pf2)).mean(dim=2, keepdim=True)
+        return torch.cat([pf1, pf2, g.expand(-1, -1, x.shape[2])], 1)
+
+    def forward(self, images, img_index, choose, cloud, obj_index):
+        """Predict poses.
+
+        Args:
+            images: (B, 3, H, W). img_index: (N,) long. choose: (N, P) long. cloud: (N, P, 3) camera-frame
+                points, metres. obj_index: (N,) long class indices.
+        Returns:
+            dict: ``R`` (N, 3, 3), ``t`` (N, 3) metres (``X_CO``), ``emb`` (N, E, P) colour embeddings,
+            ``att_r``/``att_t`` (N, P) attention weights.
+        """
+        emb = self.embed(images, img_index, choose)
+        centroid = cloud.mean(dim=1)
+        inp = cloud - centroid[:, None, :] if self.translation == "centroid_offset" else cloud
+        f = self.fuse(inp, emb)
+        hr, wr = self.att_r(self.head_r(f))
+        ht, wt = self.att_t(self.head_t(f))
+        n = len(obj_index)
+        rd = rotation_dim(self.rotation)
+        r = self.out_r(hr).view(n, self.num_classes, rd)[torch.arange(n), obj_index]
+        t = self.out_t(ht).view(n, self.num_classes, 3)[torch.arange(n), obj_index]
+        if self.rotation == "quaternion":
+            r = r + torch.tensor([1.0, 0, 0, 0], device=r.device, dtype=r.dtype)  # identity at zero output
+        if self.translation == "centroid_offset":
+            t = t + centroid
+        return {"R": rotation_from_output(r, self.rotation), "t": t, "emb": emb, "att_r": wr, "att_t": wt}
+
+
+class Refiner(nn.Module):
+    """The iterative refiner (see the module docstring): one correction per call.
+
+    forward(cloud_O (N, P, 3) object-frame points, emb (N, E, P), obj_index (N,)) ->
+    ``(R_r (N, 3, 3), t_r (N, 3))``, the residual pose to compose with
+    :func:`~sixdpose.pose.geometry.compose_refinement`.
+    """
+
+    def __init__(self, num_classes: int, width: float = 1.0, emb_dim: int = 32):
+        super().__init__()
+        self.num_classes = num_classes
+        c = lambda x: _ch(x, width)  # noqa: E731
+        self.conv1, self.conv2 = _conv1d(3, c(64), "none"), _conv1d(c(64), c(128), "none")
+        self.e_conv1, self.e_conv2 = _conv1d(emb_dim, c(64), "none"), _conv1d(c(64), c(128), "none")
+        self.conv5, self.conv6 = _conv1d(2 * c(64) + 2 * c(128), c(512), "none"), _conv1d(c(512), c(1024), "none")
+        self.head_r = nn.Sequential(nn.Linear(c(1024), c(512)), nn.ReLU(inplace=True), nn.Linear(c(512), c(128)),
+                                    nn.ReLU(inplace=True), nn.Linear(c(128), num_classes * 4))
+        self.head_t = nn.Sequential(nn.Linear(c(1024), c(512)), nn.ReLU(inplace=True), nn.Linear(c(512), c(128)),
+                                    nn.ReLU(inplace=True), nn.Linear(c(128), num_classes * 3))
+
+    def forward(self, cloud_O, emb, obj_index):  # noqa: D102
+        x = cloud_O.transpose(1, 2)
+        x1, e1 = self.conv1(x), self.e_conv1(emb)
+        x2, e2 = self.conv2(x1), self.e_conv2(e1)
+        pf = torch.cat([x1, e1, x2, e2], 1)
+        g = self.conv6(self.conv5(pf)).mean(dim=2)
+        n = len(obj_index)
+        q = self.head_r(g).view(n, self.num_classes, 4)[torch.arange(n), obj_index]
+        q = q + torch.tensor([1.0, 0, 0, 0], device=q.device, dtype=q.dtype)
+        t = self.head_t(g).view(n, self.num_classes, 3)[torch.arange(n), obj_index]
+        return quaternion_to_matrix(q), t
+
+
+def build_posenet(cfg, num_classes: int) -> PoseNet:
+    """The :class:`PoseNet` of a :class:`~sixdpose.pose.config.PoseConfig`."""
+    return PoseNet(num_classes, cfg.width, cfg.emb_dim, cfg.norm, cfg.rotation, cfg.translation)
+
+
+def build_refiner(cfg, num_classes: int, emb_dim: int) -> Refiner:
+    """The :class:`Refiner` of a :class:`~sixdpose.pose.config.RefinerConfig`."""
+    return Refiner(num_classes, cfg.width, emb_dim)

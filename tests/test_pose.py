@@ -1,0 +1,345 @@
+"""Tests of the learned pose stage (sixdpose.pose). Fast: tiny networks on a 160x120 rendered dataset;
+the smoke run (about 30 s on one core) is trained once per module."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+sys.path.insert(0, str(Path(__file__).parent))
+from test_reg_helpers import H_SMALL, K_SMALL, W_SMALL, make_shape, render_depth  # noqa: E402
+
+from sixdpose.cli import main  # noqa: E402
+from sixdpose.pose import checkpoint as ck  # noqa: E402
+from sixdpose.pose.config import PoseConfig, RefinerConfig, profile_config  # noqa: E402
+from sixdpose.pose.geometry import compose_refinement, quaternion_to_matrix, sixd_to_matrix, to_object_frame  # noqa: E402
+from sixdpose.pose.loss import pose_loss  # noqa: E402
+from sixdpose.pose.model import PSPNet, PoseNet, Refiner, build_posenet  # noqa: E402
+
+torch.set_num_threads(1)
+OID = 15
+
+
+def write_pose_dataset(root: Path, n_images: int = 3, max_deg: float = 60.0, seed: int = 0) -> Path:
+    """Like ``write_synthetic_dataset`` (one asymmetric object, 160x120, two instances in the first
+    image) with rotations of 10-``max_deg`` degrees from the identity, so a tiny network overfits it fast."""
+    from scipy.spatial.transform import Rotation
+
+    from sixdpose.datasets.layout import write_dataset
+
+    name = "035_power_drill"
+    P, N, C, diam = make_shape(0.002, seed)
+    Pd, Nd, _, _ = make_shape(0.0012, seed)
+    rng = np.random.default_rng(seed)
+    images = []
+    for im in range(n_images):
+        poses = []
+        for t in ([(-0.09, 0.0, 0.6), (0.09, 0.02, 0.6)] if im == 0 else [(0.0, 0.0, 0.55)]):
+            rv = rng.normal(size=3)
+            rv *= np.deg2rad(rng.uniform(10, max_deg)) / np.linalg.norm(rv)
+            poses.append((Rotation.from_rotvec(rv).as_matrix(), np.asarray(t)))
+        depth, label = render_depth([(Pd, Nd, R, t) for R, t in poses])
+        rgb = np.zeros((H_SMALL, W_SMALL, 3), np.uint8)
+        rgb[label >= 0] = (200, 120, 40)
+        insts = [{"obj_name": name, "obj_id": OID, "inst": k, "R": R, "t": t, "mask": label == k} for k, (R, t) in enumerate(poses)]
+        images.append({"im_id": im, "scene_id": im % 2, "K": K_SMALL, "rgb": rgb, "depth": depth, "instances": insts})
+    models = {name: {"obj_id": OID, "diameter": diam, "symmetric": False, "points": P, "normals": N, "colors": C}}
+    return write_dataset(root, images, models, {"generator": "tests.test_pose"})
+
+
+@pytest.fixture(scope="module")
+def pose_ds(tmp_path_factory) -> Path:
+    return write_pose_dataset(tmp_path_factory.mktemp("pose") / "ds")
+
+
+@pytest.fixture(scope="module")
+def smoke_run(pose_ds, tmp_path_factory) -> Path:
+    run = tmp_path_factory.mktemp("poserun") / "run"
+    assert main(["train-pose", "--data", str(pose_ds), "--out", str(run), "--profile", "smoke", "--no-progress"]) == 0
+    return run
+
+
+def fake_pose_run(path: Path, cfg: PoseConfig, classes=((OID, "035_power_drill", False),)) -> Path:
+    """A finished pose run with random weights (no training)."""
+    torch.manual_seed(0)
+    net = build_posenet(cfg, len(classes))
+    path.mkdir(parents=True, exist_ok=True)
+    ck.save_atomic({"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "kind": "pose", "config": cfg.to_dict(),
+                    "arch": cfg.arch(), "classes": [list(c) for c in classes], "epoch": 1, "global_step": 0, "elapsed": 0.0,
+                    "model": net.state_dict()}, path / ck.FINAL)
+    return path
+
+
+# ---------------------------------------------------------------- blocks
+def test_block_shapes_and_1408_fusion():
+    x = torch.randn(2, 3, 64, 48)
+    assert PSPNet(width=1 / 16, emb_dim=32)(x).shape == (2, 32, 64, 48)
+    net = PoseNet(3, width=1.0)
+    assert net.fused_channels == 1408
+    cloud, emb = torch.randn(2, 20, 3), torch.randn(2, 32, 20)
+    assert net.fuse(cloud, emb).shape == (2, 1408, 20)
+    small = PoseNet(3, width=1 / 16)
+    imgs = torch.randn(2, 3, 32, 32)
+    out = small(imgs, torch.tensor([0, 1, 1]), torch.randint(0, 32 * 32, (3, 20)), torch.randn(3, 20, 3), torch.tensor([0, 2, 1]))
+    assert out["R"].shape == (3, 3, 3) and out["t"].shape == (3, 3) and out["emb"].shape == (3, 32, 20)
+    assert torch.allclose(out["R"] @ out["R"].transpose(1, 2), torch.eye(3).expand(3, 3, 3), atol=1e-5)
+    ref = Refiner(3, width=1.0)
+    assert ref.conv5[0].in_channels == 384 and ref.conv6[0].out_channels == 1024
+    R, t = ref(torch.randn(3, 20, 3), torch.randn(3, 32, 20), torch.tensor([0, 1, 2]))
+    assert R.shape == (3, 3, 3) and t.shape == (3, 3)
+    assert not any(isinstance(m, (torch.nn.BatchNorm2d, torch.nn.GroupNorm, torch.nn.BatchNorm1d)) for m in net.modules())
+    assert any(isinstance(m, torch.nn.GroupNorm) for m in PoseNet(1, width=1 / 16, norm="group").modules())
+
+
+def test_attention_pooling_sums_to_one():
+    net = PoseNet(1, width=1 / 16)
+    out = net(torch.randn(1, 3, 32, 32), torch.tensor([0, 0]), torch.randint(0, 1024, (2, 30)), torch.randn(2, 30, 3),
+              torch.tensor([0, 0]))
+    for w in (out["att_r"], out["att_t"]):
+        assert w.shape == (2, 30) and (w >= 0).all()
+        assert torch.allclose(w.sum(1), torch.ones(2), atol=1e-6)
+
+
+def test_loss_equals_brute_force_add_and_chamfer():
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(0)
+    n, m = 3, 40
+    pts = rng.normal(size=(n, m, 3)) * 0.05
+    Rg, Rp = Rotation.random(n, random_state=1).as_matrix(), Rotation.random(n, random_state=2).as_matrix()
+    tg, tp = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    sym = np.array([False, True, False])
+    T = lambda a: torch.from_numpy(np.asarray(a))  # noqa: E731
+    got = pose_loss(T(Rp), T(tp), T(Rg), T(tg), T(pts), T(sym)).numpy()
+    for i in range(n):
+        g = pts[i] @ Rg[i].T + tg[i]
+        p = pts[i] @ Rp[i].T + tp[i]
+        if sym[i]:
+            want = np.mean([min(np.linalg.norm(g[j] - p[k]) for k in range(m)) for j in range(m)])
+        else:
+            want = np.mean([np.linalg.norm(g[j] - p[j]) for j in range(m)])
+        assert got[i] == pytest.approx(want, rel=1e-9)
+
+
+def test_quaternion_and_6d_give_rotations():
+    from scipy.spatial.transform import Rotation
+
+    q = torch.randn(50, 4, dtype=torch.float64) * 3
+    R = quaternion_to_matrix(q)
+    want = Rotation.from_quat(q[:, [1, 2, 3, 0]].numpy()).as_matrix()  # scipy: (x, y, z, w)
+    assert np.allclose(R.numpy(), want, atol=1e-12)
+    R6 = sixd_to_matrix(torch.randn(50, 6, dtype=torch.float64))
+    eye = torch.eye(3, dtype=torch.float64).expand(50, 3, 3)
+    assert torch.allclose(R6 @ R6.transpose(1, 2), eye, atol=1e-12) and torch.allclose(torch.linalg.det(R6), torch.ones(50, dtype=torch.float64))
+    Rt = torch.from_numpy(Rotation.random(5, random_state=0).as_matrix())
+    assert torch.allclose(sixd_to_matrix(torch.cat([Rt[:, :, 0], Rt[:, :, 1]], 1)), Rt, atol=1e-12)
+
+
+def test_refiner_composition_recovers_pose():
+    from scipy.spatial.transform import Rotation
+
+    R_true = torch.from_numpy(Rotation.random(4, random_state=3).as_matrix())
+    t_true = torch.randn(4, 3, dtype=torch.float64)
+    R_cur = torch.from_numpy(Rotation.random(4, random_state=4).as_matrix())
+    t_cur = torch.randn(4, 3, dtype=torch.float64)
+    # the refiner sees the cloud in the estimated object frame: the model under the residual pose
+    x = torch.randn(4, 30, 3, dtype=torch.float64)
+    cloud_C = x @ R_true.transpose(1, 2) + t_true[:, None]
+    cloud_O = to_object_frame(cloud_C, R_cur, t_cur)
+    R_d = R_cur.transpose(1, 2) @ R_true
+    t_d = (R_cur.transpose(1, 2) @ (t_true - t_cur)[:, :, None])[:, :, 0]
+    assert torch.allclose(cloud_O, x @ R_d.transpose(1, 2) + t_d[:, None], atol=1e-12)
+    R, t = compose_refinement(R_cur, t_cur, R_d, t_d)
+    assert torch.allclose(R, R_true, atol=1e-12) and torch.allclose(t, t_true, atol=1e-12)
+
+
+@pytest.mark.parametrize("crop", [32, 0])
+def test_batched_inference_equals_per_instance(pose_ds, crop):
+    from sixdpose.datasets.base import as_reader
+    from sixdpose.pose.data import Frame, collate_frames, extract_instance
+    from sixdpose.pose.infer import run_networks
+
+    cfg = profile_config("smoke", {"crop": crop})
+    torch.manual_seed(0)
+    net = build_posenet(cfg, 1).eval()
+    s = as_reader(pose_ds).load((0, 0))
+    rng = np.random.default_rng(0)
+    insts = [extract_instance(s.rgb, s.depth, s.K, g.mask, g.obj_id, crop=crop, margin=0.1, num_points=64, min_points=10,
+                              rng=rng, index=k) for k, g in enumerate(s.instances)]
+    img = None if crop else s.rgb
+    Rb, tb = run_networks(net, None, collate_frames([Frame(img, insts)], {OID: 0}), 0, "cpu")
+    for k, inst in enumerate(insts):
+        R1, t1 = run_networks(net, None, collate_frames([Frame(img, [inst])], {OID: 0}), 0, "cpu")
+        assert np.allclose(Rb[k], R1[0], atol=1e-5) and np.allclose(tb[k], t1[0], atol=1e-6)
+
+
+def test_configs_documented_and_validated():
+    from sixdpose.config import undocumented_fields
+    from sixdpose.errors import ConfigError
+
+    assert undocumented_fields(PoseConfig) == []
+    assert undocumented_fields(RefinerConfig) == []
+    for bad in ({"crop": 30}, {"translation": "x"}, {"rotation": "euler"}, {"norm": "layer"}, {"width": 0}):
+        with pytest.raises(ConfigError):
+            profile_config("smoke", bad)
+
+
+# ---------------------------------------------------------------- training, CLI
+def test_smoke_overfits_and_predict_pose_csv_is_scored(smoke_run, pose_ds, tmp_path):
+    from sixdpose.artifacts.poses import read_results
+    from sixdpose.evaluation.evaluate import evaluate
+
+    out = tmp_path / "res.csv"
+    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(smoke_run), "--out", str(out), "--no-progress"]) == 0
+    assert (tmp_path / "res.config.yml").is_file()
+    rows = read_results(out)
+    assert len(rows) == 4 and all(r.score > 0 for r in rows)
+    res = evaluate(pose_ds, rows, min_px=0)
+    assert res.n_gt == 4 and res.accuracy >= 90.0, res.records
+    for name in ("config.json", "run.json", "metrics.csv", "last.pt", "model.pt"):
+        assert (smoke_run / name).is_file()
+
+
+def test_resume_is_bit_identical(pose_ds, tmp_path):
+    from sixdpose.pose.train import train_pose
+
+    ov = dict(epochs=2, repeat=1, batch_size=2)
+    train_pose(pose_ds, tmp_path / "a", profile="smoke", progress=False, **ov)
+    train_pose(pose_ds, tmp_path / "b", profile="smoke", progress=False, **dict(ov, epochs=1))
+    s = train_pose(pose_ds, tmp_path / "b", resume=True, progress=False, epochs=2)
+    assert s["start_epoch"] == 1 and s["epochs"] == 2
+    a, b = ck.load(tmp_path / "a" / ck.LAST), ck.load(tmp_path / "b" / ck.LAST)
+    assert a["global_step"] == b["global_step"]
+    for k in a["model"]:
+        assert torch.equal(a["model"][k], b["model"][k]), k
+    for k in a["optimizer"]["state"]:
+        assert all(torch.equal(a["optimizer"]["state"][k][n], b["optimizer"]["state"][k][n]) for n in ("exp_avg", "exp_avg_sq"))
+
+
+def test_time_budget_stops_cleanly(pose_ds, tmp_path):
+    from sixdpose.pose.train import read_metrics, train_pose
+
+    s = train_pose(pose_ds, tmp_path / "r", profile="smoke", progress=False, epochs=5, repeat=1, time_budget=1e-6)
+    assert s["stopped_early"] and s["epochs"] == 1
+    assert ck.load(tmp_path / "r")["epoch"] == 1
+    assert read_metrics(tmp_path / "r")[-1]["epoch"] == 0
+
+
+def test_train_refiner_predict_and_mismatch(smoke_run, pose_ds, tmp_path, capsys):
+    ref = tmp_path / "ref"
+    assert main(["train-refiner", "--pose", str(smoke_run), "--data", str(pose_ds), "--out", str(ref), "--profile", "smoke",
+                 "--val", str(pose_ds), "--no-progress", "--set", "epochs=1"]) == 0
+    from sixdpose.pose.train import read_metrics
+
+    assert read_metrics(ref)[-1]["val_add"] is not None
+    out = tmp_path / "r.csv"
+    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(smoke_run), "--refiner", str(ref), "--iterations", "2",
+                 "--out", str(out), "--no-progress"]) == 0
+    other = fake_pose_run(tmp_path / "other", profile_config("smoke", {"width": 0.125}))
+    capsys.readouterr()
+    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(other), "--refiner", str(ref), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "architecture" in err
+    assert main(["train-refiner", "--pose", str(other), "--data", str(pose_ds), "--out", str(ref), "--resume", "--epochs", "2"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "does not match" in err
+
+
+def test_corrupt_checkpoint_one_line_exit_2(pose_ds, tmp_path, capsys):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "model.pt").write_bytes(b"not a checkpoint")
+    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(run), "--out", str(tmp_path / "x.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "corrupt" in err and "model.pt" in err
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_cli_refuses_foreign_output(pose_ds, tmp_path, capsys):
+    out = tmp_path / "busy"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    assert main(["train-pose", "--data", str(pose_ds), "--out", str(out)]) == 2
+    assert "not empty" in capsys.readouterr().err
+    foreign = tmp_path / "f.csv"
+    foreign.write_text("a,b\n")
+    run = fake_pose_run(tmp_path / "p", profile_config("smoke"))
+    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(run), "--out", str(foreign)]) == 2
+    assert foreign.read_text() == "a,b\n"
+
+
+def test_score0_rows_for_few_points_unknown_ids_and_nan_depth(pose_ds, tmp_path):
+    from sixdpose.artifacts.predictions import Detection
+    from sixdpose.datasets.base import as_reader
+    from sixdpose.pose.infer import Estimator
+
+    run = fake_pose_run(tmp_path / "p", profile_config("smoke"))
+    est = Estimator(run, device="cpu")
+    s = as_reader(pose_ds).load((0, 0))
+    m0, m1 = s.instances[0].mask, s.instances[1].mask
+    s.depth = s.depth.copy()
+    v, u = np.nonzero(m1)
+    s.depth[v[5:], u[5:]] = np.nan  # 5 valid pixels left, the rest NaN
+    dets = [Detection(OID, 0.9, m0), Detection(OID, 0.8, m1), Detection(99, 0.7, m0)]
+    rows = est.predict(s, dets)
+    assert [r.obj_id for r in rows] == [OID, OID, 99]
+    assert rows[0].score == pytest.approx(0.9) and np.isfinite(rows[0].t).all()
+    assert rows[1].score == 0 and "5 valid depth" in rows[1].reason
+    assert rows[2].score == 0 and "not a class" in rows[2].reason
+    assert len({r.time for r in rows}) == 1 and rows[0].time > 0
+
+
+def test_icp_colour_rows_and_predicted_masks(smoke_run, pose_ds, tmp_path):
+    from sixdpose.artifacts.poses import read_results
+    from sixdpose.artifacts.predictions import write_predictions
+    from sixdpose.datasets.base import as_reader
+    from sixdpose.evaluation.evaluate import evaluate
+
+    reader = as_reader(pose_ds)
+    pred = tmp_path / "pred"
+    for key in reader.keys():
+        s = reader.load(key)
+        masks = np.stack([g.mask for g in s.instances])
+        write_predictions(pred, *key, masks, [g.obj_id for g in s.instances], np.full(len(masks), 0.9))
+    out = tmp_path / "icp.csv"
+    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(smoke_run), "--masks", str(pred), "--icp",
+                 "--colour-verify", "--out", str(out), "--no-progress"]) == 0
+    rows = read_results(out)
+    assert len(rows) == 4 and all(r.score == pytest.approx(0.9) for r in rows)
+    assert evaluate(reader, rows, min_px=0).accuracy >= 75.0
+    (pred / "0_0.npz").write_bytes(b"")  # an empty prediction file: one line naming it
+    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(smoke_run), "--masks", str(pred), "--out", str(out)]) == 2
+
+
+@pytest.mark.parametrize("ov", [{"translation": "centroid_offset", "rotation": "6d"}, {"norm": "group"}, {"norm": "batch"},
+                                {"crop": 0}])
+def test_ablation_options_train_and_predict(pose_ds, tmp_path, ov):
+    from sixdpose.pose.infer import predict_dataset
+    from sixdpose.pose.train import train_pose
+
+    s = train_pose(pose_ds, tmp_path / "r", profile="smoke", progress=False, epochs=1, repeat=1, **ov)
+    assert np.isfinite(s["last_loss"])
+    rows, _ = predict_dataset(pose_ds, tmp_path / "r")
+    assert len(rows) == 4 and all(r.score > 0 and np.isfinite(r.t).all() for r in rows)
+
+
+def test_ddp_two_processes_gloo(pose_ds, tmp_path):
+    import os
+    import shutil
+    import subprocess
+
+    torchrun = Path(sys.executable).with_name("torchrun")
+    if not torchrun.exists() and not shutil.which("torchrun"):
+        pytest.skip("torchrun not installed")
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(Path(__file__).parents[1] / "src"))
+    run = tmp_path / "ddp"
+    p = subprocess.run([str(torchrun if torchrun.exists() else "torchrun"), "--nproc_per_node", "2", "--master_port", "29517",
+                        "-m", "sixdpose.cli", "train-pose", "--data", str(pose_ds), "--out", str(run), "--profile", "smoke",
+                        "--set", "epochs=2", "--set", "repeat=2", "--no-progress"], env=env, capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr[-2000:]
+    c = ck.load(run / ck.LAST)
+    assert c["world_size"] == 2 and len(c["rng"]) == 2 and c["epoch"] == 2
