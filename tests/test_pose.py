@@ -327,6 +327,7 @@ def test_ablation_options_train_and_predict(pose_ds, tmp_path, ov):
     assert len(rows) == 4 and all(r.score > 0 and np.isfinite(r.t).all() for r in rows)
 
 
+@pytest.mark.slow
 def test_ddp_two_processes_gloo(pose_ds, tmp_path):
     import os
     import shutil

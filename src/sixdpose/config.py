@@ -27,6 +27,21 @@ from .fileio import atomic_write_text
 C = TypeVar("C", bound="Config")
 
 
+class _Loader(yaml.SafeLoader):
+    """YAML 1.2 numbers: ``1e-5`` is a float (PyYAML's YAML 1.1 rules need ``1.0e-5``)."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    __import__("re").compile(r"""^[-+]?(?:\d+\.?\d*|\.\d+)[eE][-+]?\d+$"""),
+    list("-+0123456789."),
+)
+
+
+def _yaml_value(text: str):
+    return yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+
+
 def _plain(x):
     if isinstance(x, Config):
         return x.to_dict()
@@ -129,7 +144,7 @@ class Config:
         """Read a config written by :meth:`save` (JSON or YAML); raises :class:`ConfigError` naming the file."""
         path = Path(path)
         try:
-            d = yaml.safe_load(path.read_text())
+            d = _yaml_value(path.read_text())
         except FileNotFoundError:
             raise ConfigError(f"{path}: config file not found") from None
         except (OSError, yaml.YAMLError) as e:
@@ -148,7 +163,7 @@ def parse_overrides(items) -> dict[str, Any]:
             raise ConfigError(f"--set expects KEY=VALUE, got {s!r}")
         k, v = s.split("=", 1)
         try:
-            out[k.strip()] = yaml.safe_load(v)
+            out[k.strip()] = _yaml_value(v)
         except yaml.YAMLError:
             raise ConfigError(f"--set {k.strip()}: cannot parse value {v!r}") from None
     return out

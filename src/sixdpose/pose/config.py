@@ -36,22 +36,7 @@ ROTATIONS = ("quaternion", "6d")
 NORMS = ("none", "group", "batch")
 
 
-def _coerce_numbers(c) -> None:
-    """Cast str values of float/int fields to numbers: ``Config.load`` reads JSON through YAML 1.1,
-    which takes ``1e-06`` (as JSON writes small floats) for a string."""
-    import dataclasses
-
-    for f in dataclasses.fields(c):
-        v = getattr(c, f.name)
-        if isinstance(v, str) and f.type in ("float", "int", float, int):
-            try:
-                object.__setattr__(c, f.name, (float if f.type in ("float", float) else int)(v))
-            except ValueError:
-                raise ValueError(f"{f.name} must be a number, got {v!r}") from None
-
-
 def _common_checks(c) -> None:
-    _coerce_numbers(c)
     if c.epochs < 1:
         raise ValueError(f"epochs must be >= 1, got {c.epochs}")
     if c.batch_size < 1:
