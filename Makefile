@@ -49,9 +49,8 @@ notebooks-sync: setup
 demo: setup
 	mkdir -p notebooks/executed figures
 	$(PAPERMILL) notebooks/01_generate_dataset.ipynb notebooks/executed/01_generate_dataset.ipynb -p PROFILE demo -p WORKERS $(WORKERS)
-	$(PAPERMILL) notebooks/02_dataset_overview.ipynb notebooks/executed/02_dataset_overview.ipynb -p PROFILE demo
-	@for nb in 03_train_segmentation 04_hybrid_registration; do \
-	  if [ -f notebooks/$$nb.ipynb ]; then $(PAPERMILL) notebooks/$$nb.ipynb notebooks/executed/$$nb.ipynb -p PROFILE demo || exit 1; fi; done
+	@for nb in notebooks/[0-9]*.ipynb; do case $$nb in *01_generate_dataset*) continue;; esac; \
+	  $(PAPERMILL) $$nb notebooks/executed/$$(basename $$nb) -p PROFILE demo || exit 1; done
 
 reproduce: setup
 	mkdir -p notebooks/executed figures

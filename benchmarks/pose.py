@@ -33,6 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
 from sixdpose.datasets.base import Instance, Sample  # noqa: E402
 from sixdpose.pose import checkpoint as ck  # noqa: E402
+from sixdpose.runs import save_checkpoint  # noqa: E402
 from sixdpose.pose.config import profile_config, refiner_profile_config  # noqa: E402
 from sixdpose.pose.geometry import compose_refinement, to_object_frame  # noqa: E402
 from sixdpose.pose.infer import Estimator  # noqa: E402
@@ -71,8 +72,8 @@ def fake_runs(profile: str, tmp: Path, classes: int = 21):
     cls = [[i + 1, f"obj{i + 1}", False] for i in range(classes)]
     net, ref = build_posenet(cfg, classes), build_refiner(rcfg, classes, cfg.emb_dim)
     base = {"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "classes": cls, "epoch": 0, "global_step": 0, "elapsed": 0.0}
-    ck.save_atomic(dict(base, kind="pose", config=cfg.to_dict(), arch=cfg.arch(), model=net.state_dict()), tmp / "pose.pt")
-    ck.save_atomic(dict(base, kind="refiner", config=rcfg.to_dict(), arch=rcfg.arch(), model=ref.state_dict(),
+    save_checkpoint(dict(base, kind="pose", config=cfg.to_dict(), arch=cfg.arch(), model=net.state_dict()), tmp / "pose.pt")
+    save_checkpoint(dict(base, kind="refiner", config=rcfg.to_dict(), arch=rcfg.arch(), model=ref.state_dict(),
                         pose={"classes": cls, "arch": cfg.arch(), "run": str(tmp / "pose.pt")}), tmp / "ref.pt")
     return tmp / "pose.pt", tmp / "ref.pt"
 

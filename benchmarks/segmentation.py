@@ -88,6 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     from sixdpose.datasets import open_dataset
+    from sixdpose.runs import save_checkpoint
     from sixdpose.segmentation import checkpoint as ck
     from sixdpose.segmentation.config import profile_config
     from sixdpose.segmentation.data import ClassMap
@@ -112,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
         torch.manual_seed(0)
         model, init = build_model(cfg, len(classes))
         ckpt = Path(tmp.name) / "model.pt"
-        ck.save_atomic({"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "config": cfg.to_dict(),
+        save_checkpoint({"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "config": cfg.to_dict(),
                         "classes": classes.to_list(), "init": init, "epoch": 0, "model": model.state_dict()}, ckpt)
         label = f"untrained {args.profile} model ({cfg.backbone}, {len(classes)} classes)"
     results = []

@@ -272,3 +272,29 @@ def test_camera_arc_looks_at_table():
             hit = p + lam * z
             assert lam > 0 and abs(hit[0]) <= 0.25 + 1e-9 and abs(hit[1]) <= 0.2 + 1e-9
             assert p[2] > cfg.table_height
+
+
+def test_sensor_setting_applies_the_model_to_depth_only(tmp_path, ycb_dir, smoke_config):
+    """``sensor=kinect``: depth/ holds exactly simulate_depth(ideal depth) seeded from (seed, scene,
+    view); RGB, masks, gt.yml stay those of the ideal run."""
+    from sixdpose.datasets import open_dataset
+    from sixdpose.generation import generate
+    from sixdpose.generation.sensors import sensor_rng, simulate_depth
+
+    cfg = smoke_config.replace(scenes=1, views=2)
+    a, b = tmp_path / "ideal", tmp_path / "kinect"
+    generate(a, cfg, workers=1, assets=ycb_dir, progress=False)
+    generate(b, cfg.replace(sensor="kinect"), workers=1, assets=ycb_dir, progress=False)
+    assert (a / "gt.yml").read_bytes() == (b / "gt.yml").read_bytes()
+    da, db = open_dataset(a), open_dataset(b)
+    for key in da.keys():
+        sa, sb = da.load(key), db.load(key)
+        np.testing.assert_array_equal(sa.rgb, sb.rgb)
+        assert all(np.array_equal(ia.mask, ib.mask) for ia, ib in zip(sa.instances, sb.instances))
+        view = key[1] % cfg.views
+        expected = simulate_depth(sa.depth, sa.K, "kinect", sensor_rng(cfg.seed, key[0], view), rgb=sa.rgb)
+        np.testing.assert_array_equal(sb.depth, expected)
+        valid = sa.depth > 0
+        assert (sb.depth[valid] != sa.depth[valid]).mean() > 0.5  # noisy
+        assert 0.001 < ((sb.depth == 0) & valid).mean() < 0.3  # some holes, not a blank map
+    assert "sensor: kinect" in (b / "config.yml").read_text()

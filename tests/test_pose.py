@@ -15,6 +15,7 @@ from test_reg_helpers import H_SMALL, K_SMALL, W_SMALL, make_shape, render_depth
 
 from sixdpose.cli import main  # noqa: E402
 from sixdpose.pose import checkpoint as ck  # noqa: E402
+from sixdpose.runs import save_checkpoint  # noqa: E402
 from sixdpose.pose.config import PoseConfig, RefinerConfig, profile_config  # noqa: E402
 from sixdpose.pose.geometry import compose_refinement, quaternion_to_matrix, sixd_to_matrix, to_object_frame  # noqa: E402
 from sixdpose.pose.loss import pose_loss  # noqa: E402
@@ -68,7 +69,7 @@ def fake_pose_run(path: Path, cfg: PoseConfig, classes=((OID, "035_power_drill",
     torch.manual_seed(0)
     net = build_posenet(cfg, len(classes))
     path.mkdir(parents=True, exist_ok=True)
-    ck.save_atomic({"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "kind": "pose", "config": cfg.to_dict(),
+    save_checkpoint({"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "kind": "pose", "config": cfg.to_dict(),
                     "arch": cfg.arch(), "classes": [list(c) for c in classes], "epoch": 1, "global_step": 0, "elapsed": 0.0,
                     "model": net.state_dict()}, path / ck.FINAL)
     return path

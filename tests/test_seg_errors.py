@@ -16,6 +16,7 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("pycocotools")
 
 from sixdpose.segmentation import checkpoint as ck  # noqa: E402
+from sixdpose.runs import save_checkpoint  # noqa: E402
 from sixdpose.segmentation.config import profile_config  # noqa: E402
 from sixdpose.segmentation.data import ClassMap  # noqa: E402
 
@@ -31,7 +32,7 @@ def make_run(run: Path, classes: ClassMap, **cfg_changes) -> Path:
     model, init = build_model(cfg, len(classes))
     run.mkdir(parents=True, exist_ok=True)
     cfg.save(run / "config.json")
-    ck.save_atomic(
+    save_checkpoint(
         {"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "config": cfg.to_dict(),
          "classes": classes.to_list(), "init": init, "epoch": 0, "model": model.state_dict()},
         run / ck.FINAL,

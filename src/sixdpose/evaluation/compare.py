@@ -49,7 +49,7 @@ def hybrid_methods(cfg=None, workers: int = 2, methods=("ransac", "fgr", "super4
 
 
 def compare_methods(data: DatasetReader | str, methods: dict[str, Callable], mask_sources: dict[str, tuple[str, list[int]]],
-                    min_px: int = 400, threshold: float = 0.1):
+                    min_px: int = 400, threshold: float = 0.1, bop: bool = False, also=()):
     """Run every method on every mask source and evaluate each run on the same images.
 
     Args:
@@ -60,9 +60,13 @@ def compare_methods(data: DatasetReader | str, methods: dict[str, Callable], mas
             directory; every listed image is evaluated, so an image where nothing was detected counts
             its instances as failures.
         min_px, threshold: the evaluation protocol (:func:`~sixdpose.evaluation.evaluate.evaluate`).
+        bop: also the BOP scores (columns ``ar, ar_vsd, ar_mssd, ar_mspd, adds_auc``).
+        also: ``[(column label, reader)]``: the same estimates scored once more against another reader
+            of the same images, e.g. one that treats every object as symmetric (an ``ADD-S`` column).
     Returns:
         ``(table, runs)``: a tidy ``pandas.DataFrame`` with one row per (masks, method) and columns
-        ``masks, method, add_s, n_gt, n_correct, fps, instances_per_s``; and ``{(masks, method): Run}``.
+        ``masks, method, add_s, n_gt, n_correct, fps, instances_per_s`` (and the optional ones); and
+        ``{(masks, method): Run}``.
     """
     import pandas as pd
 
@@ -73,8 +77,12 @@ def compare_methods(data: DatasetReader | str, methods: dict[str, Callable], mas
         images = [keys[i] for i in indices]
         for name, run in methods.items():
             est = run(reader, masks, indices)
-            res = evaluate(reader, est, min_px=min_px, threshold=threshold, images=images)
+            res = evaluate(reader, est, min_px=min_px, threshold=threshold, images=images, bop=bop)
             runs[(label, name)] = Run(name, label, est, res)
-            rows.append({"masks": label, "method": name, "add_s": res.accuracy, "n_gt": res.n_gt, "n_correct": res.n_correct,
-                         "fps": res.fps, "instances_per_s": res.instances_per_s})
+            row = {"masks": label, "method": name, "add_s": res.accuracy, "n_gt": res.n_gt, "n_correct": res.n_correct,
+                   "fps": res.fps, "instances_per_s": res.instances_per_s}
+            row.update({k: v for k, v in res.bop.items() if k != "unannotated_symmetric_ids"})
+            for col, other in also:
+                row[col] = evaluate(other, est, min_px=min_px, threshold=threshold, images=images).accuracy
+            rows.append(row)
     return pd.DataFrame(rows), runs

@@ -199,6 +199,13 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
     )
 
 
+def _nanmean(values) -> float:
+    """Mean of the finite values (nan if there are none)."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    return float(v.mean()) if len(v) else math.nan
+
+
 def write_tables(res: EvalResult, out_dir: str | Path, label: str = "method") -> dict[str, Path]:
     """Write ``add_s_per_object.csv`` (with the BOP scores when computed), ``add_s.tex``, ``timing.csv``
     and ``summary.json`` to ``out_dir``.
@@ -214,8 +221,7 @@ def write_tables(res: EvalResult, out_dir: str | Path, label: str = "method") ->
                  "add_s_accuracy": res.accuracy, **{c: res.bop[c] for c in bop_cols}})
     rows.append({"obj_id": "objects", "name": "mean over objects", "n_gt": "", "n_correct": "",
                  "add_s_accuracy": res.mean_object_accuracy,
-                 **{c: float(np.nanmean([v["bop"][c] for v in res.per_object.values()])) if res.per_object else math.nan
-                    for c in bop_cols}})
+                 **{c: _nanmean([v["bop"][c] for v in res.per_object.values()]) for c in bop_cols}})
     paths = {"per_object": out / "add_s_per_object.csv", "latex": out / "add_s.tex"}
     write_table(rows, ["obj_id", "name", "n_gt", "n_correct", "add_s_accuracy"] + bop_cols, paths["per_object"], paths["latex"],
                 headers=["Id", "Object", "GT instances", "Correct", "ADD(-S) (\\%)"]

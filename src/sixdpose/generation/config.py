@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ..config import Config, from_profile
+from .sensors import SENSORS
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,9 @@ class GenerationConfig(Config):
         scene_radius: objects farther than this (metres) from the table centre have left the scene.
         max_attempts: re-draws of a scene that does not come to rest.
         model_points: points of each reference model cloud.
+        sensor: depth sensor model applied to every rendered view before it is written
+            (:mod:`sixdpose.generation.sensors`: ``ideal`` (the paper's perfect depth), ``kinect``,
+            ``realsense``, ``azure``), seeded from (seed, scene, view); masks and poses stay exact.
         camera: the :class:`CameraConfig`.
     """
 
@@ -93,6 +97,7 @@ class GenerationConfig(Config):
     scene_radius: float = 3.0
     max_attempts: int = 6
     model_points: int = 20000
+    sensor: str = "ideal"
     camera: CameraConfig = field(default_factory=CameraConfig)
 
     def validate(self) -> None:
@@ -109,6 +114,8 @@ class GenerationConfig(Config):
                 raise ValueError(f"{name} range must satisfy 0 <= min <= max, got {(lo, hi)}")
         if not 0 <= self.off_table_prob <= 1:
             raise ValueError("off_table_prob must be in [0, 1]")
+        if self.sensor not in SENSORS:
+            raise ValueError(f"sensor must be one of {', '.join(SENSORS)}, got {self.sensor!r}")
         if self.max_instances < 1:
             raise ValueError(f"max_instances must be >= 1, got {self.max_instances}")
 

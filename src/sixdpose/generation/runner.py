@@ -23,6 +23,7 @@ from ..constants import TARGET_OBJECTS, obj_id_of
 from .config import GenerationConfig
 from .config import profile as get_profile
 from .scene import camera_arc, default_pools, sample_scene, scene_rng
+from .sensors import sensor_rng, simulate_depth
 from ..datasets.layout import model_file, write_models_info
 from ..datasets.ply import write_ply
 from ..errors import SixdposeError
@@ -87,6 +88,8 @@ def render_scene(root: Path, cfg: GenerationConfig, assets_dir: Path, scene: int
         for v, X_WC in enumerate(cams):
             im_id = scene * cfg.views + v
             rgb, depth, label = sim.render(X_WC)
+            if cfg.sensor != "ideal":  # what the sensor sees; masks and poses stay exact
+                depth = simulate_depth(depth, K, cfg.sensor, sensor_rng(cfg.seed, scene, v), rgb=rgb)
             X_CW = np.linalg.inv(X_WC)
             insts, objs = [], []
             for k, s in enumerate(specs):

@@ -14,44 +14,17 @@ plain dictionaries readable with ``torch.load(..., weights_only=True)``::
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
-import torch
-
 from ..errors import SixdposeError
-from ..fileio import atomic_path
-from ..segmentation.checkpoint import rng_state, set_rng_state  # noqa: F401 - re-exported
+from ..runs import FINAL, LAST, load_checkpoint, resolve_checkpoint  # noqa: F401 - FINAL, LAST re-exported
 
 FORMAT = "sixdpose-pose"
 CHECKPOINT_VERSION = 1
-LAST = "last.pt"
-FINAL = "model.pt"
 
 
 class CheckpointError(SixdposeError):
     """A pose checkpoint is missing, corrupt, or incompatible (other kind, classes or architecture)."""
-
-
-def save_atomic(obj: dict, path: str | Path) -> None:
-    """``torch.save`` to a temporary file beside ``path``, fsync, then rename."""
-    with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        torch.save(obj, f)
-        f.flush()
-        os.fsync(f.fileno())
-
-
-def resolve(path: str | Path) -> Path:
-    """The checkpoint file of ``path``: the file itself, or ``model.pt`` (else ``last.pt``) of a run dir."""
-    path = Path(path)
-    if path.is_dir():
-        for name in (FINAL, LAST):
-            if (path / name).is_file():
-                return path / name
-        raise CheckpointError(f"{path}: no {FINAL} or {LAST} in this run directory (training not run or not finished an epoch)")
-    if not path.exists():
-        raise CheckpointError(f"{path}: checkpoint not found")
-    return path
 
 
 def load(path: str | Path, kind: str | None = None) -> dict:
@@ -62,19 +35,9 @@ def load(path: str | Path, kind: str | None = None) -> dict:
     Raises:
         CheckpointError: missing, corrupt, not a pose-stage checkpoint, other version or kind, incomplete.
     """
-    path = resolve(path)
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:  # noqa: BLE001 - truncated zip, pickle garbage, ...
-        msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-        raise CheckpointError(f"{path}: corrupt or unreadable checkpoint ({msg[:200]})") from None
-    if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
-        raise CheckpointError(f"{path}: not a sixdpose pose checkpoint")
-    if ckpt.get("version") != CHECKPOINT_VERSION:
-        raise CheckpointError(f"{path}: checkpoint format version {ckpt.get('version')} is not supported (expected {CHECKPOINT_VERSION})")
-    for key in ("kind", "config", "arch", "classes", "model", "epoch"):
-        if key not in ckpt:
-            raise CheckpointError(f"{path}: incomplete checkpoint (no {key!r})")
+    ckpt = load_checkpoint(path, FORMAT, CHECKPOINT_VERSION, ("kind", "config", "arch", "classes", "model", "epoch"),
+                           "pose", CheckpointError)
+    path = resolve_checkpoint(path, CheckpointError)
     if kind is not None and ckpt["kind"] != kind:
         raise CheckpointError(f"{path}: a {ckpt['kind']} checkpoint, expected a {kind} checkpoint")
     if ckpt["kind"] == "refiner" and "pose" not in ckpt:

@@ -10,12 +10,7 @@ import os
 from pathlib import Path
 
 from ..config import add_set_option, parse_overrides
-
-
-def _setup_logging(verbose: bool) -> None:
-    from ..segmentation.cli import _setup_logging as setup
-
-    setup(verbose)
+from ..runs import setup_logging
 
 
 def _overrides(args) -> dict:
@@ -40,7 +35,7 @@ def _report(s: dict) -> None:
 def _cmd_train_pose(args) -> int:
     from .train import train_pose
 
-    _setup_logging(args.verbose)
+    setup_logging(args.verbose)
     s = train_pose(args.data, args.out, profile=args.profile, resume=args.resume, masks=args.masks, val=args.val,
                    device=args.device, progress=not args.no_progress, **_overrides(args))
     _report(s)
@@ -50,7 +45,7 @@ def _cmd_train_pose(args) -> int:
 def _cmd_train_refiner(args) -> int:
     from .train import train_refiner
 
-    _setup_logging(args.verbose)
+    setup_logging(args.verbose)
     s = train_refiner(args.pose, args.data, args.out, profile=args.profile, resume=args.resume, val=args.val,
                       device=args.device, progress=not args.no_progress, **_overrides(args))
     _report(s)
@@ -64,7 +59,7 @@ def _cmd_predict(args) -> int:
     from ..fileio import atomic_write_text, claim_output_file
     from .infer import predict_dataset
 
-    _setup_logging(args.verbose)
+    setup_logging(args.verbose)
     out = Path(args.out)
     claim_output_file(out, RESULTS_HEADER)  # refuse a foreign file before any work
     if args.threads:

@@ -35,7 +35,8 @@ import torch.distributed as dist
 
 from ..datasets.base import as_reader
 from ..errors import SixdposeError
-from ..fileio import atomic_path, atomic_write_json, claim_output_dir
+from ..fileio import atomic_write_json, claim_output_dir
+from ..runs import append_metrics, dist_info, pick_device, rng_state, save_checkpoint, set_rng_state, truncate_metrics
 from . import checkpoint as ck
 from .config import PoseConfig, RefinerConfig, profile_config, refiner_profile_config
 from .data import FrameDataset, PoseError, collate_frames, collate_list, sample_model_points
@@ -60,20 +61,6 @@ def learning_rate(cfg, epoch: int, step: int) -> float:
     return lr
 
 
-def _dist_info() -> tuple[int, int, int]:
-    return int(os.environ.get("WORLD_SIZE", "1")), int(os.environ.get("RANK", "0")), int(os.environ.get("LOCAL_RANK", "0"))
-
-
-def pick_device(name: str | None = None, local_rank: int = 0) -> torch.device:
-    """``name`` if given (``cpu``, ``cuda``, ``cuda:1``), else the local GPU when present, else CPU."""
-    if name and name != "auto":
-        dev = torch.device(name)
-        if dev.type == "cuda" and not torch.cuda.is_available():
-            raise TrainingError(f"device {name!r} requested but CUDA is not available")
-        return torch.device("cuda", local_rank) if dev.type == "cuda" and dev.index is None else dev
-    return torch.device("cuda", local_rank) if torch.cuda.is_available() else torch.device("cpu")
-
-
 def _prepare_run_dir(run_dir: Path, resume: bool, cls, profile_fn, profile, overrides: dict, kind: str):
     cfg_path = run_dir / "config.json"
     if resume:
@@ -90,26 +77,6 @@ def _prepare_run_dir(run_dir: Path, resume: bool, cls, profile_fn, profile, over
         raise TrainingError(f"{run_dir}: already holds a run; use --resume to continue it or choose another --out")
     claim_output_dir(run_dir, kind)
     return profile_fn(profile or "smoke", overrides)
-
-
-def _append_csv(path: Path, rows: list[dict]) -> None:
-    new = not path.exists()
-    with open(path, "a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
-        if new:
-            w.writeheader()
-        w.writerows(rows)
-
-
-def _truncate_csv(path: Path, from_epoch: int) -> None:
-    if not path.exists():
-        return
-    with open(path, newline="") as f:
-        rows = [r for r in csv.DictReader(f) if int(r["epoch"]) < from_epoch]
-    with atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
-        w.writeheader()
-        w.writerows(rows)
 
 
 def read_metrics(run_dir: str | Path) -> list[dict]:
@@ -188,7 +155,7 @@ def train_refiner(pose_run, data, run_dir, *, profile: str | None = None, resume
 
 def _run(kind, data, run_dir, *, profile, resume, masks, val, device, progress, overrides, pose_run) -> dict:
     run_dir = Path(run_dir)
-    world, rank, local_rank = _dist_info()
+    world, rank, local_rank = dist_info()
     distributed = world > 1
     dev = pick_device(device, local_rank)
     if dev.type == "cuda":
@@ -272,12 +239,12 @@ def _train(kind, data, run_dir, profile, resume, masks, val, dev, progress, over
         start_epoch, global_step, elapsed = int(last["epoch"]), int(last.get("global_step", 0)), float(last.get("elapsed", 0.0))
         states = last.get("rng") or []
         if last.get("world_size") == world and len(states) == world:
-            ck.set_rng_state(states[rank])
+            set_rng_state(states[rank])
         if rank == 0:
             log.warning("resuming %s at epoch %d of %d", run_dir, start_epoch + 1, cfg.epochs)
     val_reader = as_reader(val, split="test") if val is not None else None
     if rank == 0:
-        _truncate_csv(run_dir / "metrics.csv", start_epoch)
+        truncate_metrics(run_dir / "metrics.csv", start_epoch, CSV_FIELDS)
         info = {"kind": kind, "classes": classes, "world_size": world, "device": str(dev), "amp": use_amp,
                 "torch": torch.__version__, "python": platform.python_version(), "data": str(reader.location), "masks": masks}
         if pose_ckpt is not None:
@@ -386,7 +353,7 @@ def _train(kind, data, run_dir, profile, resume, masks, val, dev, progress, over
                 val_add = validate_accuracy(val_reader, posenet, pose_cfg, classes, dev, refiner=net, iterations=cfg.iterations)
             rows.append({"epoch": epoch, "step": global_step, "lr": f"{lr if losses else 0:.6g}", "loss": round(mean, 6),
                          "val_add": round(val_add, 3), "seconds": round(time.time() - t_start, 3)})
-        states = [ck.rng_state()]
+        states = [rng_state()]
         if distributed:
             gathered = [None] * world
             dist.all_gather_object(gathered, states[0])
@@ -395,8 +362,8 @@ def _train(kind, data, run_dir, profile, resume, masks, val, dev, progress, over
         if distributed:
             dist.broadcast(stop, 0)
         if rank == 0:
-            _append_csv(run_dir / "metrics.csv", rows)
-            ck.save_atomic(payload(epoch + 1, False, states), run_dir / ck.LAST)
+            append_metrics(run_dir / "metrics.csv", rows, CSV_FIELDS)
+            save_checkpoint(payload(epoch + 1, False, states), run_dir / ck.LAST)
             log.info("%s epoch %d/%d: mean loss %.4f m (%.1f s)", kind, epoch + 1, cfg.epochs, mean, time.time() - t_epoch)
         if distributed:
             dist.barrier()
@@ -407,7 +374,7 @@ def _train(kind, data, run_dir, profile, resume, masks, val, dev, progress, over
             break
     done = epoch + 1 if cfg.epochs > start_epoch else start_epoch
     if rank == 0:
-        ck.save_atomic(payload(done, True), run_dir / ck.FINAL)
+        save_checkpoint(payload(done, True), run_dir / ck.FINAL)
     if distributed:
         dist.barrier()
     return {"run_dir": str(run_dir), "kind": kind, "epochs": done, "start_epoch": start_epoch, "steps": steps_run,

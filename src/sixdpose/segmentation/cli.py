@@ -6,27 +6,14 @@ Multi-GPU training: ``torchrun --nproc_per_node N -m sixdpose.cli train-seg ...`
 
 from __future__ import annotations
 
-import logging
-import sys
-
 from ..config import add_set_option, parse_overrides
-
-
-def _setup_logging(verbose: bool = False) -> None:
-    """One-line messages on stderr for the ``sixdpose`` loggers (unless logging is configured)."""
-    logger = logging.getLogger("sixdpose")
-    if not logger.handlers and not logging.getLogger().handlers:
-        h = logging.StreamHandler(sys.stderr)
-        h.setFormatter(logging.Formatter("sixdpose: %(message)s"))
-        logger.addHandler(h)
-        logger.propagate = False
-    logger.setLevel(logging.INFO if verbose else logging.WARNING)
+from ..runs import setup_logging
 
 
 def _cmd_train(args) -> int:
     from .train import train
 
-    _setup_logging(args.verbose)
+    setup_logging(args.verbose)
     overrides = parse_overrides(args.overrides)
     for name in ("epochs", "batch_size", "lr", "seed", "num_workers", "max_steps_per_epoch", "val_fraction"):
         v = vars(args)[name]
@@ -63,7 +50,7 @@ def _cmd_train(args) -> int:
 def _cmd_segment(args) -> int:
     from .infer import segment
 
-    _setup_logging(args.verbose)
+    setup_logging(args.verbose)
     if args.threads:
         import torch
 
@@ -90,7 +77,7 @@ def _cmd_segment(args) -> int:
 def _cmd_eval(args) -> int:
     from .evaluate import evaluate
 
-    _setup_logging(args.verbose)
+    setup_logging(args.verbose)
     m = evaluate(args.data, args.pred, args.figures, tag=args.tag)
     mk, bx = m["overall"]["mask"], m["overall"]["box"]
     print(

@@ -21,11 +21,11 @@ from ..artifacts.predictions import write_predictions, write_predictions_meta
 from ..datasets.base import DatasetError, as_reader
 from ..errors import ConfigError
 from ..fileio import atomic_write_json, claim_output_dir
+from ..runs import pick_device
 from . import checkpoint as ck
 from .config import SegConfig
 from .data import ClassMap, open_part
 from .model import build_model, set_train_sizes
-from .train import pick_device
 
 log = logging.getLogger("sixdpose.segmentation")
 

@@ -20,7 +20,8 @@ its shard (``DistributedSampler``) with ``DistributedDataParallel`` (NCCL on GPU
 from __future__ import annotations
 
 from ..errors import SixdposeError
-from ..fileio import atomic_path, atomic_write_json, claim_output_dir
+from ..fileio import atomic_write_json, claim_output_dir
+from ..runs import append_metrics, dist_info, pick_device, rng_state, save_checkpoint, set_rng_state, truncate_metrics
 
 import csv
 import json
@@ -52,25 +53,6 @@ class TrainingError(SixdposeError):
     """Training cannot start or continue (bad run directory, diverged loss, ...)."""
 
 
-def _dist_info() -> tuple[int, int, int]:
-    world = int(os.environ.get("WORLD_SIZE", "1"))
-    rank = int(os.environ.get("RANK", "0"))
-    local = int(os.environ.get("LOCAL_RANK", "0"))
-    return world, rank, local
-
-
-def pick_device(name: str | None = None, local_rank: int = 0) -> torch.device:
-    """``name`` if given (``cpu``, ``cuda``, ``cuda:1``), else the local GPU when present, else CPU."""
-    if name and name != "auto":
-        dev = torch.device(name)
-        if dev.type == "cuda" and not torch.cuda.is_available():
-            raise TrainingError(f"device {name!r} requested but CUDA is not available")
-        if dev.type == "cuda" and dev.index is None:
-            dev = torch.device("cuda", local_rank)
-        return dev
-    return torch.device("cuda", local_rank) if torch.cuda.is_available() else torch.device("cpu")
-
-
 def _prepare_run_dir(run_dir: Path, resume: bool, cfg: SegConfig | None, profile: str, overrides: dict) -> SegConfig:
     """Decide the config of the run (fresh or resumed) and check the directory state."""
     cfg_path = run_dir / "config.json"
@@ -94,27 +76,6 @@ def _prepare_run_dir(run_dir: Path, resume: bool, cfg: SegConfig | None, profile
     if cfg is None:
         cfg = profile_config(profile or "smoke")
     return cfg.replace(**overrides) if overrides else cfg
-
-
-def _append_csv(path: Path, rows: list[dict]) -> None:
-    new = not path.exists()
-    with open(path, "a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
-        if new:
-            w.writeheader()
-        w.writerows(rows)
-
-
-def _truncate_csv(path: Path, from_epoch: int) -> None:
-    """Drop rows of epochs ``>= from_epoch`` (they are redone after a resume)."""
-    if not path.exists():
-        return
-    with open(path, newline="") as f:
-        rows = [r for r in csv.DictReader(f) if int(r["epoch"]) < from_epoch]
-    with atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
-        w.writeheader()
-        w.writerows(rows)
 
 
 def train(
@@ -148,7 +109,7 @@ def train(
         TrainingError, DatasetError, CheckpointError, ValueError (bad config field).
     """
     run_dir = Path(run_dir)
-    world, rank, local_rank = _dist_info()
+    world, rank, local_rank = dist_info()
     distributed = world > 1
     dev = pick_device(device, local_rank)
     if dev.type == "cuda":
@@ -252,14 +213,14 @@ def _train(data, run_dir, profile, cfg, resume, dev, progress, overrides, world,
         start_epoch = int(ckpt["epoch"])
         states = ckpt.get("rng") or []
         if ckpt.get("world_size") == world and len(states) == world:
-            ck.set_rng_state(states[rank])
+            set_rng_state(states[rank])
         else:
             log.warning("resuming with %d process(es) instead of %s: RNG streams are reseeded", world, ckpt.get("world_size"))
             torch.manual_seed(cfg.seed + 7919 * (rank + 1) + start_epoch)
         if rank == 0:
             log.warning("resuming %s at epoch %d of %d", run_dir, start_epoch + 1, cfg.epochs)
     if rank == 0:
-        _truncate_csv(run_dir / "metrics.csv", start_epoch)
+        truncate_metrics(run_dir / "metrics.csv", start_epoch, CSV_FIELDS)
         atomic_write_json(run_dir / "run.json", {
             "classes": classes.to_list(),
             "init": init,
@@ -346,14 +307,14 @@ def _train(data, run_dir, profile, cfg, resume, dev, progress, overrides, world,
         mean = float(sum(losses) / max(len(losses), 1)) if losses else math.nan
         epoch_means.append(mean)
         # checkpoint: gather every rank's RNG state so a resume with the same world size is exact
-        states = [ck.rng_state()]
+        states = [rng_state()]
         if distributed:
             gathered = [None] * world
             dist.all_gather_object(gathered, states[0])
             states = gathered
         if rank == 0:
-            _append_csv(run_dir / "metrics.csv", rows)
-            ck.save_atomic(
+            append_metrics(run_dir / "metrics.csv", rows, CSV_FIELDS)
+            save_checkpoint(
                 {
                     "format": ck.FORMAT,
                     "version": ck.CHECKPOINT_VERSION,
@@ -373,7 +334,7 @@ def _train(data, run_dir, profile, cfg, resume, dev, progress, overrides, world,
             log.info("epoch %d/%d: mean loss %.4f (%.1f s)", epoch + 1, cfg.epochs, mean, time.time() - t0)
         _barrier(distributed)
     if rank == 0:
-        ck.save_atomic(
+        save_checkpoint(
             {
                 "format": ck.FORMAT,
                 "version": ck.CHECKPOINT_VERSION,
