@@ -20,7 +20,6 @@ for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_
     os.environ[_k] = "1"
 
 import argparse  # noqa: E402
-import ast  # noqa: E402
 import multiprocessing as mp  # noqa: E402
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402

@@ -5,11 +5,13 @@ Each stage keeps its own checkpoint format and errors; this module holds the mec
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import logging
 import os
 import random
 import sys
+from datetime import timedelta
 from pathlib import Path
 
 import numpy as np
@@ -57,6 +59,26 @@ def pick_device(name: str | None = None, local_rank: int = 0) -> torch.device:
             dev = torch.device("cuda", local_rank)
         return dev
     return torch.device("cuda", local_rank) if torch.cuda.is_available() else torch.device("cpu")
+
+
+@contextlib.contextmanager
+def process_group(device: str | None, timeout_hours: float = 1.0):
+    """Pick this process's device and, under torchrun, join the process group (NCCL on GPUs, gloo on
+    CPUs) for the duration of the block. Yields ``(device, world size, rank)``."""
+    import torch.distributed as dist
+
+    world, rank, local_rank = dist_info()
+    dev = pick_device(device, local_rank)
+    if dev.type == "cuda":
+        torch.cuda.set_device(dev)
+    joined = world > 1 and not dist.is_initialized()
+    if joined:
+        dist.init_process_group("nccl" if dev.type == "cuda" else "gloo", timeout=timedelta(hours=timeout_hours))
+    try:
+        yield dev, world, rank
+    finally:
+        if joined and dist.is_initialized():
+            dist.destroy_process_group()
 
 
 def save_checkpoint(obj: dict, path: str | Path) -> None:

@@ -15,7 +15,6 @@ Protocol (paper section V-A; matching as in the BOP toolkit):
 
 from __future__ import annotations
 
-import json
 import math
 from collections import defaultdict
 from dataclasses import dataclass, field

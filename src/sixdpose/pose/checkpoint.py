@@ -17,7 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import SixdposeError
-from ..runs import FINAL, LAST, load_checkpoint, resolve_checkpoint  # noqa: F401 - FINAL, LAST re-exported
+from ..runs import FINAL, LAST, load_checkpoint, resolve_checkpoint  # noqa: F401  (FINAL, LAST re-exported)
 
 FORMAT = "sixdpose-pose"
 CHECKPOINT_VERSION = 1

@@ -22,11 +22,9 @@ from __future__ import annotations
 import csv
 import logging
 import math
-import os
 import platform
 import time
 from contextlib import nullcontext
-from datetime import timedelta
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +34,7 @@ import torch.distributed as dist
 from ..datasets.base import as_reader
 from ..errors import SixdposeError
 from ..fileio import atomic_write_json, claim_output_dir
-from ..runs import append_metrics, dist_info, pick_device, rng_state, save_checkpoint, set_rng_state, truncate_metrics
+from ..runs import append_metrics, process_group, rng_state, save_checkpoint, set_rng_state, truncate_metrics
 from . import checkpoint as ck
 from .config import PoseConfig, RefinerConfig, profile_config, refiner_profile_config
 from .data import FrameDataset, PoseError, collate_frames, collate_list, sample_model_points
@@ -154,19 +152,8 @@ def train_refiner(pose_run, data, run_dir, *, profile: str | None = None, resume
 
 
 def _run(kind, data, run_dir, *, profile, resume, masks, val, device, progress, overrides, pose_run) -> dict:
-    run_dir = Path(run_dir)
-    world, rank, local_rank = dist_info()
-    distributed = world > 1
-    dev = pick_device(device, local_rank)
-    if dev.type == "cuda":
-        torch.cuda.set_device(dev)
-    if distributed and not dist.is_initialized():
-        dist.init_process_group("nccl" if dev.type == "cuda" else "gloo", timeout=timedelta(hours=1))
-    try:
-        return _train(kind, data, run_dir, profile, resume, masks, val, dev, progress, overrides, pose_run, world, rank)
-    finally:
-        if distributed and dist.is_initialized():
-            dist.destroy_process_group()
+    with process_group(device) as (dev, world, rank):
+        return _train(kind, data, Path(run_dir), profile, resume, masks, val, dev, progress, overrides, pose_run, world, rank)
 
 
 def _train(kind, data, run_dir, profile, resume, masks, val, dev, progress, overrides, pose_run, world, rank) -> dict:

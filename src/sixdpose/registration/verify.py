@@ -26,10 +26,14 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
 from scipy.spatial import cKDTree
+
+if TYPE_CHECKING:
+    from .presets import RegistrationConfig
 
 
 def chroma(colors: np.ndarray) -> np.ndarray:

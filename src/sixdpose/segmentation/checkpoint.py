@@ -16,7 +16,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import SixdposeError
-from ..runs import FINAL, LAST, load_checkpoint, resolve_checkpoint  # noqa: F401 - FINAL, LAST re-exported
+from ..runs import FINAL, LAST, load_checkpoint, resolve_checkpoint  # noqa: F401  (FINAL, LAST re-exported)
 
 FORMAT = "sixdpose-seg"
 CHECKPOINT_VERSION = 1

@@ -25,7 +25,6 @@ whatever the number of workers or processes, and across ``--resume``.
 
 from __future__ import annotations
 
-import json
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path

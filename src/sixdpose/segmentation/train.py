@@ -21,17 +21,15 @@ from __future__ import annotations
 
 from ..errors import SixdposeError
 from ..fileio import atomic_write_json, claim_output_dir
-from ..runs import append_metrics, dist_info, pick_device, rng_state, save_checkpoint, set_rng_state, truncate_metrics
+from ..runs import append_metrics, process_group, rng_state, save_checkpoint, set_rng_state, truncate_metrics
 
 import csv
 import json
 import logging
 import math
-import os
 import platform
 import time
 from contextlib import nullcontext
-from datetime import timedelta
 from pathlib import Path
 
 import torch
@@ -108,20 +106,9 @@ def train(
     Raises:
         TrainingError, DatasetError, CheckpointError, ValueError (bad config field).
     """
-    run_dir = Path(run_dir)
-    world, rank, local_rank = dist_info()
-    distributed = world > 1
-    dev = pick_device(device, local_rank)
-    if dev.type == "cuda":
-        torch.cuda.set_device(dev)
-    if distributed and not dist.is_initialized():
-        # long timeout: rank 0 scans the training images (one pass over the data) while the others wait
-        dist.init_process_group("nccl" if dev.type == "cuda" else "gloo", timeout=timedelta(hours=3))
-    try:
-        return _train(data, run_dir, profile, cfg, resume, dev, progress, overrides, world, rank, distributed)
-    finally:
-        if distributed and dist.is_initialized():
-            dist.destroy_process_group()
+    # long timeout: rank 0 scans the training images (one pass over the data) while the others wait
+    with process_group(device, timeout_hours=3.0) as (dev, world, rank):
+        return _train(data, Path(run_dir), profile, cfg, resume, dev, progress, overrides, world, rank, world > 1)
 
 
 def _barrier(distributed: bool) -> None:
