@@ -40,6 +40,8 @@ def main(argv=None) -> int:
     ap.add_argument("--presets", default="default,paper")
     ap.add_argument("--min-px", type=int, default=400)
     ap.add_argument("--csv", default=None, help="also write the table as CSV here")
+    ap.add_argument("--symmetric-ids", default=None,
+                    help="BOP only: comma-separated obj_ids treated as symmetric (for files without annotations)")
     args = ap.parse_args(argv)
 
     from sixdpose.datasets.base import open_dataset
@@ -54,7 +56,8 @@ def main(argv=None) -> int:
         from sixdpose.generation import ensure_dataset
 
         ensure_dataset(data, profile="val")
-    ds = open_dataset(data, split=args.split)
+    kw = {"symmetric_ids": [int(x) for x in args.symmetric_ids.split(",")]} if args.symmetric_ids else {}
+    ds = open_dataset(data, split=args.split, **kw)
     table = []
     for preset in args.presets.split(","):
         cfg = get_preset(preset)

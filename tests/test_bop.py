@@ -109,3 +109,40 @@ def test_export_bop_round_trip(tmp_path):
     assert main(["export-bop", "--data", str(src), "--out", str(foreign)]) == 2
     assert (foreign / "models" / "obj_000001.ply").read_text() == "mine"
     assert sorted(p.name for p in foreign.rglob("*")) == ["models", "obj_000001.ply"]
+
+
+def _exported(tmp_path):
+    src = write_synthetic_dataset(tmp_path / "syn", n_images=2, two_instances_in_first=False)
+    assert main(["export-bop", "--data", str(src), "--out", str(tmp_path / "bop")]) == 0
+    return tmp_path / "bop"
+
+
+def test_wrong_depth_scale_is_an_error_not_a_wrong_number(tmp_path, capsys):
+    """A BOP split whose depth_scale is off by 10x is refused in one line before any registration."""
+    bop = _exported(tmp_path)
+    for p in (bop / "test").glob("*/scene_camera.json"):
+        cams = json.loads(p.read_text())
+        p.write_text(json.dumps({k: dict(v, depth_scale=1.0) for k, v in cams.items()}))  # written with 0.1
+    capsys.readouterr()
+    rc = main(["register", "--data", str(bop), "--method", "ransac", "--out", str(tmp_path / "r.csv"), "--workers", "1",
+               "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "depth looks wrongly scaled" in err[0] and not (tmp_path / "r.csv").exists()
+
+
+def test_malformed_symmetry_annotation_is_a_one_line_error(tmp_path, capsys):
+    """BOP scores read the symmetry annotations; a malformed entry names the file and the field."""
+    from sixdpose.artifacts.poses import PoseEstimate, write_results
+
+    bop = _exported(tmp_path)
+    ds = open_dataset(bop, split="test")
+    s = ds[0]
+    write_results([PoseEstimate(s.scene_id, s.im_id, g.obj_id, 1.0, g.R, g.t, 0.1) for g in s.instances], tmp_path / "r.csv")
+    info_path = bop / "models" / "models_info.json"
+    info = json.loads(info_path.read_text())
+    info["15"]["symmetries_continuous"] = [{"axis": [0, 0, 0], "offset": [0, 0, 0]}]
+    info_path.write_text(json.dumps(info))
+    capsys.readouterr()
+    rc = main(["evaluate", "--data", str(bop), "--results", str(tmp_path / "r.csv"), "--min-px", "0"])
+    err = [line for line in capsys.readouterr().err.splitlines() if "error:" in line]  # (progress bars aside)
+    assert rc == 2 and len(err) == 1 and "models_info" in err[0] and "axis" in err[0], err

@@ -191,6 +191,47 @@ def open_dataset(path: str | Path, split: str = "test", **kwargs) -> DatasetRead
     )
 
 
+def check_depth_scale(reader: "DatasetReader", n_images: int = 3, low: float = 0.5, high: float = 2.0) -> float | None:
+    """Guard against a wrong depth unit: compare the median masked depth of annotated instances with
+    their ground-truth distance ``t_z`` on the first ``n_images`` images that have both.
+
+    A correct depth map puts an object's visible surface a little in front of its origin (ratio about
+    0.8-1.05); a millimetre/metre mix-up or a wrong BOP ``depth_scale`` is off by a factor of 10 or more.
+
+    Returns:
+        the median ratio, or ``None`` when no image has depth, masks and poses to compare.
+    Raises:
+        DatasetError: the ratio lies outside ``[low, high]``.
+    """
+    ratios, seen = [], 0
+    for key in reader.keys()[:50]:
+        try:
+            s = reader.load(key, rgb=False)
+        except DatasetError:
+            continue
+        if s.depth is None:
+            return None
+        before = len(ratios)
+        for inst in s.instances:
+            if inst.mask is None or inst.t[2] <= 0 or inst.mask.shape != s.depth.shape:
+                continue
+            d = s.depth[inst.mask]
+            d = d[np.isfinite(d) & (d > 0)]
+            if len(d) >= 20:
+                ratios.append(float(np.median(d)) / float(inst.t[2]))
+        seen += len(ratios) > before
+        if seen >= n_images:
+            break
+    if not ratios:
+        return None
+    r = float(np.median(ratios))
+    if not low <= r <= high:
+        raise DatasetError(f"{reader.location}: depth looks wrongly scaled: the masked depth is {r:.3g} x the ground-truth "
+                           "distance of the objects (check the depth unit: metres in the synthetic layout, "
+                           "depth_scale in BOP scene_camera.json)")
+    return r
+
+
 def as_reader(data: "str | Path | DatasetReader", split: str = "test", **kwargs) -> DatasetReader:
     """``data`` itself if it is already a :class:`DatasetReader`, else :func:`open_dataset` of the path.
 
