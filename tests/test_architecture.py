@@ -234,7 +234,8 @@ def test_claim_output_dir_rules(tmp_path):
     assert claim_output_dir(tmp_path / "empty", "segment") is False
 
 
-@pytest.mark.parametrize("command", ["generate", "export-bop", "train-seg", "segment", "register", "evaluate", "fetch-ycb"])
+@pytest.mark.parametrize("command", ["generate", "export-bop", "train-seg", "segment", "register", "evaluate", "fetch-ycb",
+                                     "train-pose", "train-refiner", "predict-pose"])
 def test_every_writing_command_refuses_a_foreign_directory(tmp_path, command, capsys):
     from sixdpose.cli import main
     from sixdpose.segmentation.toydata import make_toy_dataset
@@ -252,6 +253,10 @@ def test_every_writing_command_refuses_a_foreign_directory(tmp_path, command, ca
         "register": ["register", "--data", str(syn), "--method", "ransac", "--out", str(d / "models" / "obj_000001.ply")],
         "evaluate": ["evaluate", "--data", str(syn), "--results", str(results), "--out", str(d)],
         "fetch-ycb": ["fetch-ycb", "--to", str(d), "--objects", "055_baseball", "--base-url", "http://127.0.0.1:9"],
+        "train-pose": ["train-pose", "--data", str(syn), "--out", str(d), "--no-progress"],
+        "train-refiner": ["train-refiner", "--pose", str(tmp_path / "no-run"), "--data", str(syn), "--out", str(d), "--no-progress"],
+        "predict-pose": ["predict-pose", "--data", str(syn), "--pose", str(tmp_path / "no-run"),
+                         "--out", str(d / "models" / "obj_000001.ply"), "--no-progress"],
     }[command]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -161,6 +161,8 @@ def _train(kind, data, run_dir, profile, resume, masks, val, dev, progress, over
     distributed = world > 1
     is_pose = kind == "pose"
     cls, pfn = (PoseConfig, profile_config) if is_pose else (RefinerConfig, refiner_profile_config)
+    command = "train-pose" if is_pose else "train-refiner"
+    claim_output_dir(run_dir, command, create=False)  # refuse a foreign directory before reading anything
     reader = as_reader(data, split="train")
     if masks != "gt" and not Path(masks).is_dir():
         raise PoseError(f"{masks}: prediction directory not found (use --masks gt for ground-truth masks)")
@@ -169,7 +171,7 @@ def _train(kind, data, run_dir, profile, resume, masks, val, dev, progress, over
         pose_ckpt = ck.load(pose_run, kind="pose")
     # rank 0 checks/claims the directory; then every rank reads the saved config
     if rank == 0:
-        cfg = _prepare_run_dir(run_dir, resume, cls, pfn, profile, overrides, "train-pose" if is_pose else "train-refiner")
+        cfg = _prepare_run_dir(run_dir, resume, cls, pfn, profile, overrides, command)
         cfg.save(run_dir / "config.json")
     if distributed:
         dist.barrier()
