@@ -7,7 +7,7 @@ from pathlib import Path
 
 def register(sub) -> None:
     """Add the ``evaluate`` subcommand."""
-    p = sub.add_parser("evaluate", help="ADD(-S) accuracy and FPS of a BOP results CSV",
+    p = sub.add_parser("evaluate", help="ADD(-S), BOP average recall, ADD-S AUC and FPS of a BOP results CSV",
                        description="Score a results CSV against the dataset's ground truth (paper section V-A).")
     p.add_argument("--data", required=True, help="dataset directory (synthetic layout or BOP root)")
     p.add_argument("--results", required=True, help="BOP results CSV (from `sixdpose register`)")

@@ -369,3 +369,28 @@ def _train(kind, data, run_dir, profile, resume, masks, val, dev, progress, over
     return {"run_dir": str(run_dir), "kind": kind, "epochs": done, "start_epoch": start_epoch, "steps": steps_run,
             "first_loss": epoch_means[0] if epoch_means else math.nan, "last_loss": epoch_means[-1] if epoch_means else math.nan,
             "val_add": val_add, "stopped_early": stopped_early, "seconds": time.time() - t_start}
+
+
+def ensure_trained(kind: str, data, run_dir: str | Path, profile: str = "smoke", *, pose_run=None, val=None,
+                   progress: bool = False, **overrides) -> dict:
+    """Train a run unless it is already complete (for notebooks and pipelines).
+
+    ``run_dir/model.pt`` present: nothing is trained (``status`` ``loaded``); an interrupted run
+    (``last.pt`` only) is resumed; otherwise a new run of ``profile`` is trained.
+
+    Args:
+        kind: ``"pose"`` or ``"refiner"`` (the latter needs ``pose_run``).
+    Returns:
+        ``{"status": "loaded" | "resumed" | "trained", ...}`` (the training summary when trained).
+    """
+    run_dir = Path(run_dir)
+    if (run_dir / ck.FINAL).is_file():
+        c = ck.load(run_dir / ck.FINAL, kind=kind)
+        return {"status": "loaded", "run_dir": str(run_dir), "epochs": c["epoch"]}
+    resume = (run_dir / ck.LAST).is_file()
+    if kind == "pose":
+        s = train_pose(data, run_dir, profile=None if resume else profile, resume=resume, val=val, progress=progress, **overrides)
+    else:
+        s = train_refiner(pose_run, data, run_dir, profile=None if resume else profile, resume=resume, val=val,
+                          progress=progress, **overrides)
+    return {"status": "resumed" if resume else "trained", **s}

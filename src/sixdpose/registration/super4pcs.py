@@ -154,10 +154,10 @@ def _closest_line_params(a, b, c, d):
     A, B, C = (u * u).sum(-1), (u * v).sum(-1), (v * v).sum(-1)
     D, E = (u * w).sum(-1), (v * w).sum(-1)
     den = A * C - B * B
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):  # parallel lines: nan, flagged below
         s = (B * E - C * D) / den
         t = (A * E - B * D) / den
-    gap = np.linalg.norm((a + s[..., None] * u) - (c + t[..., None] * v), axis=-1)
+        gap = np.linalg.norm((a + s[..., None] * u) - (c + t[..., None] * v), axis=-1)
     bad = den <= 1e-12 * A * C
     s = np.where(bad, np.nan, s)
     t = np.where(bad, np.nan, t)

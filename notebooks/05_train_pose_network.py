@@ -1,0 +1,81 @@
+# %% [markdown]
+# # 05 · Learned pose network (paper section IV-C)
+#
+# Trains the DenseFusion-like network of the paper (PSPNet/ResNet-18 colour embedding without
+# normalisation layers, PointNet geometry branch, per-point fusion, attention pooling, ADD / chamfer loss)
+# or loads an existing run, then shows the training curve, the ADD(-S) accuracy per object on held-out
+# images and estimated poses over the images (Fig. 7). The logic lives in `sixdpose.pose`; the same steps
+# on the command line are `sixdpose train-pose` and `sixdpose predict-pose`.
+#
+# * `smoke` (CI) and `demo`: the smoke network on a few images, a pipeline check (its accuracy means nothing).
+# * For results: `POSE_PROFILE = "cpu"` (2 hours on this machine with the refiner, on
+#   `sixdpose generate --profile train`) or `"paper"` (GPU), and `TEST_DATA` the held-out `test` split.
+
+# %% tags=["parameters"]
+# Parameters: plain values only (papermill overrides them). None means "from the environment / the profile",
+# resolved in the next cell: PROFILE from $SIXDPOSE_PROFILE (the CI / headless switch, default "smoke").
+PROFILE = None  # smoke (CI), demo (laptop CPU), paper (GPU machine)
+DATA = None  # training data; None: $SIXDPOSE_DATA, else ../data/<PROFILE>
+TEST_DATA = None  # held-out data; None: the training data's images (smoke, demo: a pipeline check)
+RUN_DIR = None  # None: ../runs/pose_<PROFILE>
+POSE_PROFILE = None  # None: "paper" at paper scale, else "smoke"
+TEST_IMAGES = None  # images predicted; None: smoke 4, demo 12, paper all
+FIGURES = "../figures"
+
+# %%
+import os
+
+PROFILE = PROFILE or os.environ.get("SIXDPOSE_PROFILE", "smoke")
+DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{PROFILE}"
+TEST_DATA = TEST_DATA or DATA
+RUN_DIR = RUN_DIR or f"../runs/pose_{PROFILE}"
+POSE_PROFILE = POSE_PROFILE or ("paper" if PROFILE == "paper" else "smoke")
+TEST_IMAGES = TEST_IMAGES or {"smoke": 4, "demo": 12}.get(PROFILE, 0)
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+
+from sixdpose.artifacts.tables import write_table
+from sixdpose.datasets import open_dataset
+from sixdpose.evaluation.evaluate import evaluate
+from sixdpose.evaluation.visualize import plot_cases
+from sixdpose.generation import ensure_dataset
+from sixdpose.pose.infer import predict_dataset
+from sixdpose.pose.plots import plot_training
+from sixdpose.pose.train import ensure_trained
+
+ensure_dataset(DATA, profile=PROFILE)
+figures = Path(FIGURES)
+figures.mkdir(parents=True, exist_ok=True)
+
+# %% [markdown]
+# ## Training (or loading an existing run)
+
+# %%
+summary = ensure_trained("pose", DATA, RUN_DIR, profile=POSE_PROFILE)
+summary
+
+# %%
+plot_training(RUN_DIR, out=figures / f"pose_training_{PROFILE}.png", title=f"pose network ({POSE_PROFILE} profile)")
+plt.show()
+
+# %% [markdown]
+# ## Accuracy per object (ground-truth masks, instances with >= 400 visible pixels)
+
+# %%
+test = open_dataset(TEST_DATA)
+estimates, _ = predict_dataset(test, RUN_DIR, iterations=0, limit=TEST_IMAGES)
+result = evaluate(test, estimates, min_px=400)
+per_object = [{"obj_id": o, "name": v["name"], "n_gt": v["n_gt"], "add_s": v["accuracy"]} for o, v in result.per_object.items()]
+write_table(per_object + [{"obj_id": "all", "name": "mean over instances", "n_gt": result.n_gt, "add_s": result.accuracy}],
+            ["obj_id", "name", "n_gt", "add_s"], figures / f"pose_per_object_{PROFILE}.csv")
+print(f"ADD(-S) {result.accuracy:.2f}% of {result.n_gt} instances, {result.fps:.2f} FPS")
+per_object
+
+# %% [markdown]
+# ## Fig. 7: estimated poses over the images (GT green, estimate red)
+
+# %%
+fig = plot_cases(test, result, n_good=3, n_bad=3, ncols=3, title="learned pose, no refinement")
+fig.savefig(figures / f"fig7_learned_{PROFILE}.png", dpi=120)
+plt.show()
