@@ -29,8 +29,6 @@ several arithmetic passes over it.
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
-from scipy.special import ndtr
 
 __all__ = [
     "SENSORS",
@@ -254,6 +252,8 @@ def _rounded_normal(rng: np.random.Generator, shape: tuple[int, ...], sigma: flo
     16-bit uniform integers (probabilities resolved to 1/65536; several times cheaper than drawing
     float Gaussians and rounding them)."""
     kmax = int(np.ceil(6 * sigma + 0.5))
+    from scipy.special import ndtr  # scipy only when a sensor model runs (the generator imports this module)
+
     t = np.rint(ndtr((np.arange(-kmax, kmax) + 0.5) / sigma) * 65536)  # P(K <= k) for k < kmax
     x = rng.integers(0, 65536, size=shape, dtype=np.uint16)
     k = np.full(shape, -kmax + int(np.sum(t <= 0)), dtype=np.int16)
@@ -282,6 +282,8 @@ def _nguyen_into(z: np.ndarray, theta: np.ndarray, tmp: np.ndarray) -> np.ndarra
 
 def _box_filter(src: np.ndarray, window: int, out: np.ndarray) -> np.ndarray:
     """Mean over window x window neighbourhoods (mirror-reflected at the image border) into ``out``."""
+    from scipy import ndimage
+
     return ndimage.uniform_filter(src, window, output=out, mode="reflect")
 
 
