@@ -29,6 +29,7 @@ _LAZY = {
     "predict_dataset": "infer",
     "train_pose": "train",
     "train_refiner": "train",
+    "ensure_trained": "train",
 }
 
 
