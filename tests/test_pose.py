@@ -190,6 +190,7 @@ def test_configs_documented_and_validated():
 
 
 # ---------------------------------------------------------------- training, CLI
+@pytest.mark.slow
 def test_smoke_overfits_and_predict_pose_csv_is_scored(smoke_run, pose_ds, tmp_path):
     from sixdpose.artifacts.poses import read_results
     from sixdpose.evaluation.evaluate import evaluate
@@ -230,6 +231,7 @@ def test_time_budget_stops_cleanly(pose_ds, tmp_path):
     assert read_metrics(tmp_path / "r")[-1]["epoch"] == 0
 
 
+@pytest.mark.slow  # uses the trained smoke network
 def test_train_refiner_predict_and_mismatch(smoke_run, pose_ds, tmp_path, capsys):
     ref = tmp_path / "ref"
     assert main(["train-refiner", "--pose", str(smoke_run), "--data", str(pose_ds), "--out", str(ref), "--profile", "smoke",
@@ -294,6 +296,7 @@ def test_score0_rows_for_few_points_unknown_ids_and_nan_depth(pose_ds, tmp_path)
     assert len({r.time for r in rows}) == 1 and rows[0].time > 0
 
 
+@pytest.mark.slow  # uses the trained smoke network
 def test_icp_colour_rows_and_predicted_masks(smoke_run, pose_ds, tmp_path):
     from sixdpose.artifacts.poses import read_results
     from sixdpose.artifacts.predictions import write_predictions

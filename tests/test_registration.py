@@ -251,6 +251,7 @@ def test_register_cli_errors(syn, tmp_path, capsys):
     assert not (tmp_path / "x.csv").exists()
 
 
+@pytest.mark.slow
 def test_two_workers_match_one(syn, tmp_path):
     # without Super4PCS's wall-clock limit the result cannot depend on how busy the machine is
     cfg = get_preset("default", s4pcs_max_time=None)
@@ -262,6 +263,7 @@ def test_two_workers_match_one(syn, tmp_path):
 
 
 @needs_ycbv
+@pytest.mark.slow
 def test_real_depth_ycbv_every_method(tmp_path):
     """Every method on real Kinect depth (ycbv_sample, GT masks, 2 images): ADD-S within 10 % for most."""
     from sixdpose.evaluation.metrics import adds

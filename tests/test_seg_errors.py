@@ -237,6 +237,7 @@ def test_eval_rejects_non_prediction_dir(toy, tmp_path):
 
 
 # -- BOP data ---------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_segment_and_eval_bop_sample(tmp_path):
     """On real BOP frames (YCB-V sample): obj ids in the npz, GT from mask_visib, AP computed."""
     from sixdpose.datasets import open_dataset

@@ -55,6 +55,7 @@ def test_checkpoint_contents(reference):
     assert cfg["profile"] == "smoke" and cfg["epochs"] == 2
 
 
+@pytest.mark.slow
 def test_resume_extends_run_exactly(toy, reference, tmp_path):
     """1 epoch, then --resume to 2 epochs == 2 epochs in one go (bitwise, on CPU)."""
     from sixdpose.segmentation.train import read_metrics, train
@@ -68,6 +69,7 @@ def test_resume_extends_run_exactly(toy, reference, tmp_path):
     assert [r["epoch"] for r in read_metrics(run)] == [r["epoch"] for r in read_metrics(reference)]
 
 
+@pytest.mark.slow
 def test_resume_after_interruption(toy, reference, tmp_path, monkeypatch):
     """A crash in the middle of epoch 2 loses only that epoch; --resume redoes it identically."""
     from sixdpose.segmentation import data as segdata

@@ -61,7 +61,7 @@ def test_select_base_is_coplanar_with_crossing_diagonals():
     assert np.linalg.norm(e1 - e2) < 0.002
 
 
-@pytest.mark.parametrize("seed,outliers", [(0, 0.0), (1, 0.0), (2, 0.25), (3, 0.25)])
+@pytest.mark.parametrize("seed,outliers", [pytest.param(0, 0.0, marks=pytest.mark.slow), pytest.param(1, 0.0, marks=pytest.mark.slow), (2, 0.25), (3, 0.25)])
 def test_super4pcs_partial_view_known_pose(seed, outliers):
     rng = np.random.default_rng(seed)
     Pm, Nm, _, diam = make_shape(0.003, seed=seed)

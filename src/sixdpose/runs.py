@@ -1,5 +1,5 @@
 """Training-run plumbing shared by the networks' stages (segmentation, learned pose): devices and
-process groups, atomic checkpoints with every RNG state, the per-epoch ``metrics.csv``, and logging.
+process groups, atomic checkpoints with every RNG state and the per-epoch ``metrics.csv``.
 Each stage keeps its own checkpoint format and errors; this module holds the mechanics once.
 """
 
@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import contextlib
 import csv
-import logging
 import os
 import random
 import sys
@@ -27,17 +26,6 @@ FINAL = "model.pt"
 
 class RunError(SixdposeError):
     """A run cannot use the requested device or read its checkpoint."""
-
-
-def setup_logging(verbose: bool = False) -> None:
-    """One-line messages on stderr for the ``sixdpose`` loggers (unless logging is configured)."""
-    logger = logging.getLogger("sixdpose")
-    if not logger.handlers and not logging.getLogger().handlers:
-        h = logging.StreamHandler(sys.stderr)
-        h.setFormatter(logging.Formatter("sixdpose: %(message)s"))
-        logger.addHandler(h)
-        logger.propagate = False
-    logger.setLevel(logging.INFO if verbose else logging.WARNING)
 
 
 def dist_info() -> tuple[int, int, int]:

@@ -1,6 +1,16 @@
-"""Evaluation: ADD(-S) metrics (:mod:`.metrics`, paper eq. 4) and accuracy/timing of results files
-(:mod:`.evaluate`)."""
+"""Evaluation: ADD(-S) and the BOP 2019 metrics (:mod:`.metrics`, paper eq. 4), accuracy and timing of
+results (:mod:`.evaluate`, :mod:`.bop`), method comparisons (:mod:`.compare`) and figures
+(:mod:`.visualize`). Imported lazily, so building the command line does not load scipy."""
 
-from .metrics import add, add_or_adds, adds, is_correct, rotation_error, translation_error
+import importlib
 
-__all__ = ["add", "add_or_adds", "adds", "is_correct", "rotation_error", "translation_error"]
+_LAZY = {name: "metrics" for name in ("add", "add_or_adds", "adds", "is_correct", "rotation_error", "translation_error")}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = sorted(_LAZY)

@@ -10,7 +10,7 @@ import os
 from pathlib import Path
 
 from ..config import add_set_option, parse_overrides
-from ..runs import setup_logging
+from ..logs import setup_logging
 
 
 def _overrides(args) -> dict:

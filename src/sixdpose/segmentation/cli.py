@@ -7,7 +7,7 @@ Multi-GPU training: ``torchrun --nproc_per_node N -m sixdpose.cli train-seg ...`
 from __future__ import annotations
 
 from ..config import add_set_option, parse_overrides
-from ..runs import setup_logging
+from ..logs import setup_logging
 
 
 def _cmd_train(args) -> int:
