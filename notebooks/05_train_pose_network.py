@@ -19,7 +19,7 @@ DATA = None  # training data; None: $SIXDPOSE_DATA, else ../data/<PROFILE>
 TEST_DATA = None  # held-out data; None: the training data's images (smoke, demo: a pipeline check)
 RUN_DIR = None  # None: ../runs/pose_<PROFILE>
 POSE_PROFILE = None  # None: "paper" at paper scale, else "smoke"
-TEST_IMAGES = None  # images predicted; None: smoke 4, demo 12, paper all
+TEST_IMAGES = None  # images predicted; None: smoke 4, demo 6, paper all
 FIGURES = "../figures"
 
 # %%
@@ -30,7 +30,7 @@ DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{PROFILE}"
 TEST_DATA = TEST_DATA or DATA
 RUN_DIR = RUN_DIR or f"../runs/pose_{PROFILE}"
 POSE_PROFILE = POSE_PROFILE or ("paper" if PROFILE == "paper" else "smoke")
-TEST_IMAGES = TEST_IMAGES or {"smoke": 4, "demo": 12}.get(PROFILE, 0)
+TEST_IMAGES = TEST_IMAGES or {"smoke": 4, "demo": 6}.get(PROFILE, 0)
 from pathlib import Path
 
 import matplotlib.pyplot as plt

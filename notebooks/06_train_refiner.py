@@ -15,7 +15,7 @@ TEST_DATA = None  # held-out data; None: the training data's images (smoke, demo
 POSE_RUN = None  # None: ../runs/pose_<PROFILE> (notebook 05)
 RUN_DIR = None  # None: ../runs/refiner_<PROFILE>
 REFINER_PROFILE = None  # None: "paper" at paper scale, else "smoke"
-TEST_IMAGES = None  # images predicted; None: smoke 4, demo 12, paper all
+TEST_IMAGES = None  # images predicted; None: smoke 4, demo 4, paper all
 MAX_ITERATIONS = 4
 FIGURES = "../figures"
 
@@ -28,7 +28,7 @@ TEST_DATA = TEST_DATA or DATA
 POSE_RUN = POSE_RUN or f"../runs/pose_{PROFILE}"
 RUN_DIR = RUN_DIR or f"../runs/refiner_{PROFILE}"
 REFINER_PROFILE = REFINER_PROFILE or ("paper" if PROFILE == "paper" else "smoke")
-TEST_IMAGES = TEST_IMAGES or {"smoke": 4, "demo": 12}.get(PROFILE, 0)
+TEST_IMAGES = TEST_IMAGES or {"smoke": 4, "demo": 4}.get(PROFILE, 0)
 from pathlib import Path
 
 import matplotlib.pyplot as plt
