@@ -14,7 +14,7 @@ FIGURES = "../figures"
 PRED_DIR = "auto"  # predicted masks of notebook 03; "auto": ../runs/seg_<PROFILE>/pred_test if it exists; None: GT only
 SPLIT = "test"
 PRESET = "default"
-MAX_IMAGES = None  # images registered per method; None: smoke 3 (< 2 min), demo 12, paper all
+MAX_IMAGES = None  # images registered per method; None: smoke 3 (< 2 min), demo 6, paper all
 WORKERS = 2
 
 # %%
@@ -24,7 +24,7 @@ PROFILE = PROFILE or os.environ.get("SIXDPOSE_PROFILE", "smoke")
 DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{PROFILE}"
 if PRED_DIR == "auto":
     PRED_DIR = f"../runs/seg_{PROFILE}/pred_test"
-MAX_IMAGES = MAX_IMAGES or {"smoke": 3, "demo": 12}.get(PROFILE)
+MAX_IMAGES = MAX_IMAGES or {"smoke": 3, "demo": 6}.get(PROFILE)
 from pathlib import Path
 
 import matplotlib.pyplot as plt

@@ -15,9 +15,9 @@ BOP_DATA = None  # None: $SIXDPOSE_BOP, else ../../shared/data/ycbv_sample
 BOP_SPLIT = "train_real"
 SYMMETRIC_IDS = [1, 13, 14, 16, 18, 19, 20, 21]  # BOP YCB-Video symmetric objects (the sample has no annotations)
 FIGURES = "../figures"
-MAX_IMAGES = None  # real frames per method; None: smoke 4, demo 8, paper all
+MAX_IMAGES = None  # real frames per method; None: smoke 4, demo 5, paper all
 SYN_PROFILE = None  # generator profile of the ideal-vs-kinect comparison; None: smoke, demo as PROFILE, else test
-SYN_IMAGES = None  # synthetic images per method (from the first scenes); None: smoke 2, demo 8, paper all
+SYN_IMAGES = None  # synthetic images per method (from the first scenes); None: smoke 2, demo 4, paper all
 WORKERS = 2
 
 # %%
@@ -25,9 +25,9 @@ import os
 
 PROFILE = PROFILE or os.environ.get("SIXDPOSE_PROFILE", "smoke")
 BOP_DATA = BOP_DATA or os.environ.get("SIXDPOSE_BOP") or "../../shared/data/ycbv_sample"
-MAX_IMAGES = MAX_IMAGES or {"smoke": 4, "demo": 8}.get(PROFILE)
+MAX_IMAGES = MAX_IMAGES or {"smoke": 4, "demo": 5}.get(PROFILE)
 SYN_PROFILE = SYN_PROFILE or (PROFILE if PROFILE in ("smoke", "demo") else "test")
-SYN_IMAGES = SYN_IMAGES or {"smoke": 2, "demo": 8}.get(PROFILE)
+SYN_IMAGES = SYN_IMAGES or {"smoke": 2, "demo": 4}.get(PROFILE)
 from pathlib import Path
 
 import matplotlib.pyplot as plt

@@ -225,8 +225,9 @@ def test_resume_is_bit_identical(pose_ds, tmp_path):
 def test_time_budget_stops_cleanly(pose_ds, tmp_path):
     from sixdpose.pose.train import read_metrics, train_pose
 
-    s = train_pose(pose_ds, tmp_path / "r", profile="smoke", progress=False, epochs=5, repeat=1, time_budget=1e-6)
+    s = train_pose(pose_ds, tmp_path / "r", profile="smoke", progress=False, epochs=5, repeat=4, time_budget=1e-6)
     assert s["stopped_early"] and s["epochs"] == 1
+    assert s["steps"] == 1  # checked after every step: the other 3 steps of the epoch are skipped
     assert ck.load(tmp_path / "r")["epoch"] == 1
     assert read_metrics(tmp_path / "r")[-1]["epoch"] == 0
 

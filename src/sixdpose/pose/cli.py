@@ -87,7 +87,7 @@ def _train_args(p, refiner: bool) -> None:
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its last completed epoch")
     p.add_argument("--val", default=None, help="validation dataset scored every epoch (ADD(-S) %% into metrics.csv), e.g. data/val")
     p.add_argument("--epochs", type=int, help="number of epochs (may be raised on --resume)")
-    p.add_argument("--time-budget", dest="time_budget", type=float, help="seconds; stop after the epoch that exceeds it (0: none)")
+    p.add_argument("--time-budget", dest="time_budget", type=float, help="seconds; once spent (checked every step) the epoch ends early and training stops (0: none)")
     p.add_argument("--seed", type=int, help="seed of initialisation, shuffling and sampling")
     p.add_argument("--threads", type=int, help="torch CPU threads per process")
     p.add_argument("--device", default=None, help="cpu, cuda or auto (default: GPU when present)")
