@@ -4,6 +4,7 @@ Usage::
 
     python benchmarks/pose.py [--profile cpu|smoke|paper] [--pose RUN --refiner RUN2] [--device cpu|cuda]
                               [--instances 6] [--frames 10] [--steps 10] [--threads N] [--json OUT]
+                              [--seg SEG_RUN --data DIR]
 
 * Training throughput (instances/s): optimiser steps of the main network and of the refiner
   (2 unrolled iterations) for the profile's config and batch size, on synthetic inputs (random crops
@@ -13,6 +14,9 @@ Usage::
   refinement iterations, copies to the CPU. Frames are built in memory beforehand (no disk reads);
   segmentation is not included. Without ``--pose`` untrained networks of the profile are timed
   (the cost does not depend on the weights).
+* With ``--seg SEG_RUN --data DIR`` (trained runs): end-to-end FPS on the dataset's first ``--frames``
+  real frames, loaded into memory first: Mask R-CNN on the RGB image, then the pose network and 2
+  refinement iterations on every detection of the frame in one batch (section V-A: disk reads excluded).
 * Peak memory: CPU: the process' peak resident set size (MiB); CUDA: ``torch.cuda.max_memory_allocated``.
 """
 
@@ -154,6 +158,37 @@ def inference_fps(pose, refiner, device, instances: int, frames: int) -> dict:
             "infer_instances_per_frame": instances}
 
 
+def end_to_end_fps(seg, pose, refiner, data, device, frames: int) -> dict:
+    """Frames per second of segmentation + pose + 2 refinement iterations on a dataset's first frames."""
+    from sixdpose.artifacts.predictions import Detection
+    from sixdpose.datasets.base import as_reader
+    from sixdpose.segmentation.infer import Segmenter
+
+    reader = as_reader(data, split="test")
+    samples = [reader.load(k, masks=False) for k in reader.keys()[: frames + 1]]  # disk reads not timed
+    segm = Segmenter(seg, device=str(device))
+    est = Estimator(pose, refiner, iterations=2, device=str(device))  # detections scored >= 0.5, as predict-pose
+
+    def run(sample):
+        out = segm.predict([sample.rgb])[0]
+        dets = [Detection(int(o), float(s), m) for o, s, m in zip(out["labels"], out["scores"], out["masks"])]
+        return est.predict(sample, dets), len(dets)
+
+    run(samples[0])  # warm-up
+    times, n_det = [], 0
+    for s in samples[1:]:
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        t0 = time.perf_counter()
+        _, n = run(s)
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        times.append(time.perf_counter() - t0)
+        n_det += n
+    return {"e2e_fps": 1.0 / float(np.mean(times)), "e2e_ms_per_frame": 1000 * float(np.mean(times)),
+            "e2e_detections_per_frame": n_det / max(len(times), 1), "e2e_frames": len(times)}
+
+
 def main(argv=None) -> int:
     """Parse the arguments, run the benchmarks, print (and optionally save) the figures."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -166,7 +201,12 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=10)
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--json", default=None)
+    ap.add_argument("--seg", default=None, help="a trained segmentation run: also time segmentation + pose end to end")
+    ap.add_argument("--data", default=None, help="dataset whose first --frames frames the end-to-end timing uses (with --seg)")
     a = ap.parse_args(argv)
+    if (a.seg is None) != (a.data is None) or (a.seg and not a.pose):
+        print("--seg and --data go together, and need --pose (and --refiner)", file=sys.stderr)
+        return 2
     if a.threads:
         torch.set_num_threads(a.threads)
     device = torch.device(a.device)
@@ -178,6 +218,8 @@ def main(argv=None) -> int:
         pose, ref = (a.pose, a.refiner) if a.pose else fake_runs(a.profile, Path(tmp))
         out.update(inference_fps(pose, ref, device, a.instances, a.frames))
         out["infer_peak_mib"] = peak_mib(device)
+        if a.seg:
+            out.update(end_to_end_fps(a.seg, pose, ref, a.data, device, a.frames))
         if device.type == "cuda":
             torch.cuda.reset_peak_memory_stats(device)
         out.update(train_throughput(a.profile, device, a.steps, a.instances))

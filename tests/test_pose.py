@@ -349,3 +349,21 @@ def test_ddp_two_processes_gloo(pose_ds, tmp_path):
     assert p.returncode == 0, p.stderr[-2000:]
     c = ck.load(run / ck.LAST)
     assert c["world_size"] == 2 and len(c["rng"]) == 2 and c["epoch"] == 2
+
+
+def test_ablation_trains_each_variant_and_scores_on_val(pose_ds, tmp_path):
+    from sixdpose.pose.ablation import COLUMNS, run_ablation
+
+    variants = {"paper": {"translation": "absolute", "norm": "none"}, "offset+group": {"translation": "centroid_offset", "norm": "group"}}
+    t = run_ablation(pose_ds, pose_ds, tmp_path / "abl", profile="smoke", variants=variants, epochs=2, min_px=0)
+    assert list(t.columns) == list(COLUMNS) and list(t["variant"]) == ["paper", "offset+group"]
+    assert list(t["translation"]) == ["absolute", "centroid_offset"] and list(t["norm"]) == ["none", "group"]
+    assert (t["epochs"] == 2).all() and (t["steps"] > 0).all() and (t["n_val"] > 0).all()
+    assert t["val_add"].between(0, 100).all()
+    runs = sorted(p.name for p in (tmp_path / "abl").iterdir())
+    assert runs == ["0_paper", "1_offset_group"]
+    # a second call scores the finished runs without training them again
+    mtime = (tmp_path / "abl" / "0_paper" / "model.pt").stat().st_mtime_ns
+    t2 = run_ablation(pose_ds, pose_ds, tmp_path / "abl", profile="smoke", variants=variants, epochs=2, min_px=0)
+    assert (tmp_path / "abl" / "0_paper" / "model.pt").stat().st_mtime_ns == mtime
+    assert list(t2["val_add"]) == list(t["val_add"])

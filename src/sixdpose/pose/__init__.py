@@ -30,6 +30,7 @@ _LAZY = {
     "train_pose": "train",
     "train_refiner": "train",
     "ensure_trained": "train",
+    "run_ablation": "ablation",
 }
 
 
