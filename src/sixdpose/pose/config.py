@@ -68,7 +68,9 @@ class PoseConfig(Config):
             box (enlarged by ``crop_margin``), resized to N x N pixels (a multiple of 8), as DenseFusion.
         crop_margin: relative enlargement of the mask box before cropping (0.1 = 10 % per side).
         translation: ``absolute`` (camera-frame translation, the paper) or ``centroid_offset``
-            (an offset from the masked cloud's centroid; the cloud is centred before the point net).
+            (the position of the model's box centre as an offset from the masked cloud's centroid, then
+            ``t = centre - R c_O``; the cloud is centred before the point net and both are expressed in
+            units of 5 cm, ``model.OFFSET_SCALE``).
         rotation: ``quaternion`` (normalised, the paper) or ``6d`` (Zhou et al. 2019, Gram-Schmidt).
         norm: ``none`` (the paper: no normalisation layers), ``group`` (GroupNorm) or ``batch``
             (BatchNorm) after every convolution of the CNN and the point branches.
@@ -206,8 +208,8 @@ class RefinerConfig(Config):
 PROFILES: dict[str, PoseConfig] = {
     "paper": PoseConfig(),
     "cpu": PoseConfig(profile="cpu", width=0.25, crop=64, num_points=256, num_model_points=256, rgb_noise=0.1,
-                      translation="centroid_offset", epochs=40, batch_size=4, lr=1e-3, warmup_steps=200,
-                      lr_step_epochs=2, lr_gamma=0.6, amp=False, time_budget=50 * 60.0, num_workers=1, num_threads=2),
+                      translation="centroid_offset", rotation="6d", epochs=40, batch_size=4, lr=1e-3, warmup_steps=200,
+                      lr_step_epochs=2, lr_gamma=0.6, amp=False, time_budget=40 * 60.0, num_workers=1, num_threads=2),
     "smoke": PoseConfig(profile="smoke", width=1 / 16, crop=32, num_points=64, num_model_points=64, rgb_noise=0.0,
                         max_images=4, repeat=4, epochs=120, batch_size=4, lr=1e-2, warmup_steps=0,
                         lr_step_epochs=60, lr_gamma=0.3, amp=False, num_workers=0, num_threads=1, log_every=5),
@@ -216,7 +218,7 @@ PROFILES: dict[str, PoseConfig] = {
 REFINER_PROFILES: dict[str, RefinerConfig] = {
     "paper": RefinerConfig(),
     "cpu": RefinerConfig(profile="cpu", width=0.25, num_points=256, num_model_points=256, epochs=20, batch_size=4,
-                         lr=1e-3, lr_step_epochs=6, amp=False, time_budget=20 * 60.0, num_workers=1, num_threads=2),
+                         lr=1e-3, lr_step_epochs=6, amp=False, time_budget=15 * 60.0, num_workers=1, num_threads=2),
     "smoke": RefinerConfig(profile="smoke", width=1 / 16, num_points=64, num_model_points=64, max_images=4, repeat=4,
                            epochs=3, batch_size=2, lr=1e-3, lr_step_epochs=100, amp=False, num_workers=0,
                            num_threads=1, log_every=5),

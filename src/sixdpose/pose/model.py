@@ -13,7 +13,9 @@ Shapes (``w`` = width multiplier, ``c(x) = max(1, round(x * w))``; ``w = 1`` is 
   128 + 256 + 1024 = 1408 per point. Rotation and translation heads 1408->640->256->128 each,
   attention pooling (Linear(128, 1) score per point, softmax over points, weighted sum), then a
   per-class linear output: rotation (quaternion 4 or 6D 6) and translation (3).
-* :class:`Refiner`: object-frame cloud (N, P, 3) + detached embedding (N, emb_dim, P): geometry
+* :class:`Refiner`: object-frame cloud (N, P, 3) (fed in units of ``OFFSET_SCALE`` = 5 cm, its
+  translation output in the same units: a change of units from the authors' metres, so that the
+  point features are not swamped by the biases of a from-scratch network) + detached embedding (N, emb_dim, P): geometry
   3->64->128, embedding emb->64->128, [64+64] and [128+128] concatenated (384) -> 512 -> 1024,
   averaged; heads 1024->512->128 -> per-class quaternion and translation.
 
@@ -30,6 +32,10 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from .geometry import quaternion_to_matrix, rotation_dim, rotation_from_output
+
+
+#: Length unit (metres) of the centred cloud and of the predicted offset in ``centroid_offset`` mode.
+OFFSET_SCALE = 0.05
 
 
 def _ch(x: int, width: float) -> int:
@@ -190,6 +196,14 @@ class PoseNet(nn.Module):
         self.att_r, self.att_t = AttentionPool(c(128)), AttentionPool(c(128))
         self.out_r = nn.Linear(c(128), num_classes * rotation_dim(rotation))
         self.out_t = nn.Linear(c(128), num_classes * 3)
+        # (num_classes, 3) metres: each class's model-box centre in its object frame (set_centres); the
+        # centroid_offset mode predicts where this centre is, so the translation does not hinge on the
+        # rotation when a model's origin lies off its body (YCB origins are up to 12 cm off)
+        self.register_buffer("centres", torch.zeros(num_classes, 3))
+
+    def set_centres(self, centres) -> None:
+        """Set the per-class model-box centres, (num_classes, 3) metres in the object frames (saved in the state)."""
+        self.centres.copy_(torch.as_tensor(centres, dtype=self.centres.dtype))
 
     def embed(self, images: torch.Tensor, img_index: torch.Tensor, choose: torch.Tensor) -> torch.Tensor:
         """Per-point colour embeddings: one CNN pass over ``images``, gathered at the sampled pixels.
@@ -225,7 +239,9 @@ class PoseNet(nn.Module):
         """
         emb = self.embed(images, img_index, choose)
         centroid = cloud.mean(dim=1)
-        inp = cloud - centroid[:, None, :] if self.translation == "centroid_offset" else cloud
+        # centroid_offset: the centred cloud in units of OFFSET_SCALE (spread ~1, not ~0.05 m, so the
+        # geometry features are not swamped by the biases) and the offset predicted in the same units
+        inp = (cloud - centroid[:, None, :]) / OFFSET_SCALE if self.translation == "centroid_offset" else cloud
         f = self.fuse(inp, emb)
         hr, wr = self.att_r(self.head_r(f))
         ht, wt = self.att_t(self.head_t(f))
@@ -235,9 +251,10 @@ class PoseNet(nn.Module):
         t = self.out_t(ht).view(n, self.num_classes, 3)[torch.arange(n), obj_index]
         if self.rotation == "quaternion":
             r = r + torch.tensor([1.0, 0, 0, 0], device=r.device, dtype=r.dtype)  # identity at zero output
-        if self.translation == "centroid_offset":
-            t = t + centroid
-        return {"R": rotation_from_output(r, self.rotation), "t": t, "emb": emb, "att_r": wr, "att_t": wt}
+        R = rotation_from_output(r, self.rotation)
+        if self.translation == "centroid_offset":  # t_c = centroid + offset is the model-box centre
+            t = centroid + OFFSET_SCALE * t - torch.einsum("nij,nj->ni", R, self.centres[obj_index].to(R.dtype))
+        return {"R": R, "t": t, "emb": emb, "att_r": wr, "att_t": wt}
 
 
 class Refiner(nn.Module):
@@ -261,7 +278,7 @@ class Refiner(nn.Module):
                                     nn.ReLU(inplace=True), nn.Linear(c(128), num_classes * 3))
 
     def forward(self, cloud_O, emb, obj_index):  # noqa: D102
-        x = cloud_O.transpose(1, 2)
+        x = cloud_O.transpose(1, 2) / OFFSET_SCALE  # object-frame cloud in units of OFFSET_SCALE (spread ~1)
         x1, e1 = self.conv1(x), self.e_conv1(emb)
         x2, e2 = self.conv2(x1), self.e_conv2(e1)
         pf = torch.cat([x1, e1, x2, e2], 1)
@@ -269,7 +286,7 @@ class Refiner(nn.Module):
         n = len(obj_index)
         q = self.head_r(g).view(n, self.num_classes, 4)[torch.arange(n), obj_index]
         q = q + torch.tensor([1.0, 0, 0, 0], device=q.device, dtype=q.dtype)
-        t = self.head_t(g).view(n, self.num_classes, 3)[torch.arange(n), obj_index]
+        t = OFFSET_SCALE * self.head_t(g).view(n, self.num_classes, 3)[torch.arange(n), obj_index]
         return quaternion_to_matrix(q), t
 
 

@@ -210,6 +210,10 @@ def _train(kind, data, run_dir, profile, resume, masks, val, dev, progress, over
     torch.manual_seed(cfg.seed)  # identical initialisation on every rank
     if is_pose:
         net = build_posenet(cfg, len(classes))
+        centres = np.zeros((len(classes), 3), np.float32)
+        for oid, pts in model_points.items():
+            centres[class_index[oid]] = (pts.min(0) + pts.max(0)) / 2.0
+        net.set_centres(centres)
     else:
         net = build_refiner(cfg, len(classes), int(pose_ckpt["arch"]["emb_dim"]))
     net.to(dev)
