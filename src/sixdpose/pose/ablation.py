@@ -62,12 +62,13 @@ def run_ablation(train, val, out_dir, *, profile: str = "cpu", time_budget: floa
         slug = "".join(c if c.isalnum() else "_" for c in name.lower()).strip("_")[:40]
         run = out_dir / f"{k}_{slug}"
         ensure_trained("pose", train_r, run, profile=profile, progress=progress, **shared, **ov)
-        cfg = load(run)["config"]
+        ckpt = load(run)
+        cfg = ckpt["config"]
         metrics = [r for r in read_metrics(run) if r["val_add"] is None]
         est, _ = predict_dataset(val_r, run, iterations=0, limit=val_images)
         res = evaluate(val_r, est, min_px=min_px, images=val_r.keys()[:val_images] if val_images else None)
         rows.append({"variant": name, "translation": cfg["translation"], "rotation": cfg["rotation"], "norm": cfg["norm"],
-                     "epochs": load(run)["epoch"], "steps": metrics[-1]["step"] if metrics else 0,
+                     "epochs": ckpt["epoch"], "steps": metrics[-1]["step"] if metrics else 0,
                      "train_seconds": round(metrics[-1]["seconds"], 1) if metrics else 0.0,
                      "val_add": round(res.accuracy, 2), "n_val": res.n_gt})
     return pd.DataFrame(rows, columns=list(COLUMNS))

@@ -11,10 +11,10 @@ Profiles (``PROFILES`` for the main network, ``REFINER_PROFILES`` for the refine
 
 ``cpu``
     The best this 2-core CPU machine can do in at most 2 hours for both networks together on a
-    generated ``train`` split: 64x64 crops around each mask's box, width 0.25, 256 points, the
-    translation predicted as an offset from the masked cloud's centroid (the output starts at the
-    centroid, a few cm from the answer, instead of at the camera origin), the learning rate x0.6 every
-    2 epochs, and time budgets of 50 min (main net) and 20 min (refiner), 70 min in all.
+    generated ``train`` split: 64x64 crops around each mask's box, width 0.25, 256 points, a 6D
+    rotation, the translation as the model-box centre's offset from the masked cloud's centroid
+    (``translation = centroid_offset``), the learning rate x0.6 every 2 epochs, and time budgets of
+    40 min (main net) and 15 min (refiner) of training.
 
 ``smoke``
     Continuous integration: 32x32 crops, width 1/16, 64 points, 64 model points, the first 4 images

@@ -328,24 +328,23 @@ def _train(kind, data, run_dir, profile, resume, masks, val, dev, progress, over
             losses.append(lv)
             global_step += 1
             steps_run += 1
-            if rank == 0 and (step % cfg.log_every == 0 or step == steps_per_epoch - 1):
+            spent = False
+            if cfg.time_budget > 0:  # checked after every step: a long epoch cannot overrun the budget
+                flag = torch.tensor([float(elapsed + time.time() - t_epoch >= cfg.time_budget)])
+                if distributed:
+                    dist.broadcast(flag, 0)
+                spent = bool(flag.item())
+            if rank == 0 and (step % cfg.log_every == 0 or step == steps_per_epoch - 1 or spent):
                 rows.append({"epoch": epoch, "step": global_step, "lr": f"{lr:.6g}", "loss": round(lv, 6), "val_add": "",
                              "seconds": round(time.time() - t_start, 3)})
             if bar is not None:
                 bar.set_postfix(loss=f"{lv:.4f}")
                 bar.update(1)
-            if cfg.time_budget > 0:  # checked after every step: a long epoch cannot overrun the budget
-                spent = torch.tensor([float(elapsed + time.time() - t_epoch >= cfg.time_budget)])
-                if distributed:
-                    dist.broadcast(spent, 0)
-                if bool(spent.item()):
-                    if rank == 0 and step + 1 < steps_per_epoch:
-                        log.warning("time budget of %.0f s spent at step %d of %d of epoch %d: the rest of the epoch is skipped",
-                                    cfg.time_budget, step + 1, steps_per_epoch, epoch + 1)
-                    if rank == 0 and (step % cfg.log_every != 0 and step != steps_per_epoch - 1):
-                        rows.append({"epoch": epoch, "step": global_step, "lr": f"{lr:.6g}", "loss": round(lv, 6), "val_add": "",
-                                     "seconds": round(time.time() - t_start, 3)})
-                    break
+            if spent:
+                if rank == 0 and step + 1 < steps_per_epoch:
+                    log.warning("time budget of %.0f s spent at step %d of %d of epoch %d: the rest of the epoch is skipped",
+                                cfg.time_budget, step + 1, steps_per_epoch, epoch + 1)
+                break
         if bar is not None:
             bar.close()
         mean = float(np.mean(losses)) if losses else math.nan
