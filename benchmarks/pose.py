@@ -82,6 +82,21 @@ def fake_runs(profile: str, tmp: Path, classes: int = 21):
     return tmp / "pose.pt", tmp / "ref.pt"
 
 
+def timed(fn, items, device) -> list[float]:
+    """Wall seconds of ``fn(item)`` for each of ``items``, with the device synchronised around each call
+    (CUDA kernels are asynchronous: without it the clock would stop before the work does)."""
+    times = []
+    for item in items:
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        t0 = time.perf_counter()
+        fn(item)
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        times.append(time.perf_counter() - t0)
+    return times
+
+
 def train_throughput(profile: str, device, steps: int, inst_per_image: int = 6, classes: int = 21) -> dict:
     """Instances per second of optimiser steps of the main network and of the refiner."""
     cfg, rcfg = profile_config(profile), refiner_profile_config(profile)
@@ -127,14 +142,7 @@ def train_throughput(profile: str, device, steps: int, inst_per_image: int = 6, 
     for name, fn in (("pose", step_main), ("refiner", step_ref)):
         for _ in range(2):
             fn()
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            fn()
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        res[f"train_{name}_instances_per_s"] = n * steps / (time.perf_counter() - t0)
+        res[f"train_{name}_instances_per_s"] = n * steps / sum(timed(lambda _: fn(), range(steps), device))
     res["train_instances_per_step"] = n
     return res
 
@@ -145,15 +153,7 @@ def inference_fps(pose, refiner, device, instances: int, frames: int) -> dict:
     frame = synthetic_frame(instances)
     for r in est.predict(frame):  # warm-up (first-call allocations)
         pass
-    times = []
-    for _ in range(frames):
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        t0 = time.perf_counter()
-        est.predict(frame)
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        times.append(time.perf_counter() - t0)
+    times = timed(lambda _: est.predict(frame), range(frames), device)
     return {"infer_fps": 1.0 / float(np.mean(times)), "infer_ms_per_frame": 1000 * float(np.mean(times)),
             "infer_instances_per_frame": instances}
 
@@ -175,16 +175,9 @@ def end_to_end_fps(seg, pose, refiner, data, device, frames: int) -> dict:
         return est.predict(sample, dets), len(dets)
 
     run(samples[0])  # warm-up
-    times, n_det = [], 0
-    for s in samples[1:]:
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        t0 = time.perf_counter()
-        _, n = run(s)
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        times.append(time.perf_counter() - t0)
-        n_det += n
+    n_det = []
+    times = timed(lambda s: n_det.append(run(s)[1]), samples[1:], device)
+    n_det = sum(n_det)
     return {"e2e_fps": 1.0 / float(np.mean(times)), "e2e_ms_per_frame": 1000 * float(np.mean(times)),
             "e2e_detections_per_frame": n_det / max(len(times), 1), "e2e_frames": len(times)}
 
