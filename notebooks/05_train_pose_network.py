@@ -14,28 +14,32 @@
 # %% tags=["parameters"]
 # Parameters: plain values only (papermill overrides them). None means "from the environment / the profile",
 # resolved in the next cell: PROFILE from $SIXDPOSE_PROFILE (the CI / headless switch, default "smoke").
-PROFILE = None  # smoke (CI), demo (laptop CPU), paper (GPU machine)
-DATA = None  # training data; None: $SIXDPOSE_DATA, else ../data/<PROFILE>
-TEST_DATA = None  # held-out data; None: the training data's images (smoke, demo: a pipeline check)
+PROFILE = None  # smoke (CI), demo (laptop CPU), cpu (2 h on a 2-core CPU: train / val / test splits), paper (GPU)
+DATA = None  # training data; None: $SIXDPOSE_DATA, else ../data/<PROFILE> (cpu: ../data/train)
+TEST_DATA = None  # held-out data; None: the training data's images (smoke, demo: a pipeline check), else ../data/test
 RUN_DIR = None  # None: ../runs/pose_<PROFILE>
-POSE_PROFILE = None  # None: "paper" at paper scale, else "smoke"
-TEST_IMAGES = None  # images predicted; None: smoke 4, demo 6, paper all
+POSE_PROFILE = None  # None: the pose profile of the same name (smoke for demo)
+TEST_IMAGES = None  # images predicted; None: smoke 4, demo 6, else all
 ABLATION_VAL = None  # held-out split of the ablation (never test); None: TEST_DATA at smoke/demo, else ../data/val
-ABLATION_BUDGET = None  # seconds of training per variant; None: smoke/demo 3 epochs of the smoke network, else 1200
+ABLATION_EPOCHS = None  # epochs of training per variant; None: smoke/demo 3, cpu 1 (ignored when ABLATION_BUDGET is set)
+ABLATION_BUDGET = None  # seconds of training per variant instead of epochs; None: paper 1200, else unused
 FIGURES = "../figures"
 
 # %%
 import os
 
 PROFILE = PROFILE or os.environ.get("SIXDPOSE_PROFILE", "smoke")
-DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{PROFILE}"
-TEST_DATA = TEST_DATA or DATA
-RUN_DIR = RUN_DIR or f"../runs/pose_{PROFILE}"
-POSE_PROFILE = POSE_PROFILE or ("paper" if PROFILE == "paper" else "smoke")
-TEST_IMAGES = TEST_IMAGES or {"smoke": 4, "demo": 6}.get(PROFILE, 0)
 SMALL = PROFILE in ("smoke", "demo")
+GEN_PROFILE = {"cpu": "train"}.get(PROFILE, PROFILE)  # generator profile of the training data
+DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{GEN_PROFILE}"
+TEST_DATA = TEST_DATA or (DATA if SMALL else "../data/test")
+RUN_DIR = RUN_DIR or f"../runs/pose_{PROFILE}"
+POSE_PROFILE = POSE_PROFILE or ("smoke" if SMALL else PROFILE)
+TEST_IMAGES = TEST_IMAGES or {"smoke": 4, "demo": 6}.get(PROFILE, 0)
 ABLATION_VAL = ABLATION_VAL or (TEST_DATA if SMALL else "../data/val")
-ABLATION_BUDGET = ABLATION_BUDGET or (0 if SMALL else 1200)
+if ABLATION_BUDGET is None and PROFILE == "paper":
+    ABLATION_BUDGET = 1200
+ABLATION_EPOCHS = ABLATION_EPOCHS or (3 if SMALL else 1)
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -50,7 +54,10 @@ from sixdpose.pose.infer import predict_dataset
 from sixdpose.pose.plots import plot_training
 from sixdpose.pose.train import ensure_trained
 
-ensure_dataset(DATA, profile=PROFILE)
+ensure_dataset(DATA, profile=GEN_PROFILE)
+if not SMALL:
+    ensure_dataset(TEST_DATA, profile="test")  # seed 300: never trained or tuned on
+    ensure_dataset(ABLATION_VAL, profile="val")
 figures = Path(FIGURES)
 figures.mkdir(parents=True, exist_ok=True)
 
@@ -92,9 +99,11 @@ plt.show()
 # Rows: the paper's choices (absolute translation, quaternion, no normalisation layers), then the
 # translation as an offset from the masked cloud's centroid, a continuous 6D rotation, and group or batch
 # normalisation put back (the paper's claim is that they hurt). Scored on `val`, never on `test`.
+# The budget is the same number of epochs (steps) per variant, with each one's training seconds beside
+# it; on a machine of its own, `ABLATION_BUDGET` gives every variant the same seconds instead.
 
 # %%
-budget = {"epochs": 3} if SMALL else {"time_budget": ABLATION_BUDGET}
+budget = {"time_budget": ABLATION_BUDGET} if ABLATION_BUDGET else {"epochs": ABLATION_EPOCHS}
 ablation = run_ablation(DATA, ABLATION_VAL, f"{RUN_DIR}_ablation", profile=POSE_PROFILE, val_images=TEST_IMAGES, **budget)
 write_table(ablation, list(ablation.columns), figures / f"pose_ablation_{PROFILE}.csv", figures / f"pose_ablation_{PROFILE}.tex")
 ablation

@@ -9,13 +9,13 @@
 # %% tags=["parameters"]
 # Parameters: plain values only (papermill overrides them). None means "from the environment / the profile",
 # resolved in the next cell: PROFILE from $SIXDPOSE_PROFILE (the CI / headless switch, default "smoke").
-PROFILE = None  # smoke (CI), demo (laptop CPU), paper (GPU machine)
-DATA = None  # training data; None: $SIXDPOSE_DATA, else ../data/<PROFILE>
-TEST_DATA = None  # held-out data; None: the training data's images (smoke, demo: a pipeline check)
+PROFILE = None  # smoke (CI), demo (laptop CPU), cpu (2 h on a 2-core CPU: train / test splits), paper (GPU)
+DATA = None  # training data; None: $SIXDPOSE_DATA, else ../data/<PROFILE> (cpu: ../data/train)
+TEST_DATA = None  # held-out data; None: the training data's images (smoke, demo: a pipeline check), else ../data/test
 POSE_RUN = None  # None: ../runs/pose_<PROFILE> (notebook 05)
 RUN_DIR = None  # None: ../runs/refiner_<PROFILE>
-REFINER_PROFILE = None  # None: "paper" at paper scale, else "smoke"
-TEST_IMAGES = None  # images predicted; None: smoke 4, demo 4, paper all
+REFINER_PROFILE = None  # None: the refiner profile of the same name (smoke for demo)
+TEST_IMAGES = None  # images predicted; None: smoke 4, demo 4, else all
 MAX_ITERATIONS = 4
 FIGURES = "../figures"
 
@@ -23,11 +23,13 @@ FIGURES = "../figures"
 import os
 
 PROFILE = PROFILE or os.environ.get("SIXDPOSE_PROFILE", "smoke")
-DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{PROFILE}"
-TEST_DATA = TEST_DATA or DATA
+SMALL = PROFILE in ("smoke", "demo")
+GEN_PROFILE = {"cpu": "train"}.get(PROFILE, PROFILE)  # generator profile of the training data
+DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{GEN_PROFILE}"
+TEST_DATA = TEST_DATA or (DATA if SMALL else "../data/test")
 POSE_RUN = POSE_RUN or f"../runs/pose_{PROFILE}"
 RUN_DIR = RUN_DIR or f"../runs/refiner_{PROFILE}"
-REFINER_PROFILE = REFINER_PROFILE or ("paper" if PROFILE == "paper" else "smoke")
+REFINER_PROFILE = REFINER_PROFILE or ("smoke" if SMALL else PROFILE)
 TEST_IMAGES = TEST_IMAGES or {"smoke": 4, "demo": 4}.get(PROFILE, 0)
 from pathlib import Path
 
@@ -43,9 +45,10 @@ from sixdpose.pose.infer import predict_dataset
 from sixdpose.pose.plots import plot_iterations, plot_training
 from sixdpose.pose.train import ensure_trained
 
-ensure_dataset(DATA, profile=PROFILE)
-pose_profile = "paper" if PROFILE == "paper" else "smoke"
-ensure_trained("pose", DATA, POSE_RUN, profile=pose_profile)  # notebook 05's run (trained here if missing)
+ensure_dataset(DATA, profile=GEN_PROFILE)
+if not SMALL:
+    ensure_dataset(TEST_DATA, profile="test")  # seed 300: never trained or tuned on
+ensure_trained("pose", DATA, POSE_RUN, profile=REFINER_PROFILE)  # notebook 05's run (trained here if missing)
 figures = Path(FIGURES)
 figures.mkdir(parents=True, exist_ok=True)
 
