@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 #: The 18 target objects, in the order of the merged-mask codes of section III-C.
-#: The object id of a target (``obj_id``) is its 1-based position in this list.
+#: The object id of a target (``obj_id``) is its 1-based position in this list. Other target sets
+#: (``GenerationConfig.target_objects``, BOP models) follow :func:`merged_mask_codes`.
 TARGET_OBJECTS: tuple[str, ...] = (
     "055_baseball",
     "056_tennis_ball",
@@ -29,6 +30,33 @@ TARGET_OBJECTS: tuple[str, ...] = (
 MERGED_MASK_CODES: dict[str, int] = dict(
     zip(TARGET_OBJECTS, (14, 28, 42, 56, 70, 85, 99, 113, 127, 141, 155, 170, 184, 198, 212, 226, 240, 255))
 )
+
+
+def merged_mask_codes(names, max_instances: int = 4) -> dict[str, int]:
+    """Merged-mask codes of a target set: the paper's for its 18 targets, one rule for any other set.
+
+    Rule: with ``N`` targets ordered by ``obj_id``, the ``k``-th (1-based) gets code
+    ``floor(255 k / N)``; a pixel of instance ``i`` holds ``code - i``. For the paper's 18 targets in
+    the paper's order this gives exactly the paper's codes 14, 28, ..., 255 (section III-C); a set of
+    19 gives 13, 26, ..., 255.
+
+    Args:
+        names: target names in ``obj_id`` order. max_instances: instances of one object per scene.
+    Returns:
+        name -> code.
+    Raises:
+        ValueError: the set is empty or too large for uint8 codes (two codes closer than
+            ``max_instances``, or the first code below ``max_instances``).
+    """
+    names = list(names)
+    n = len(names)
+    if n == 0:
+        raise ValueError("no target objects")
+    codes = [(255 * k) // n for k in range(1, n + 1)]
+    if codes[0] < max_instances or min(b - a for a, b in zip([0] + codes, codes)) < max_instances:
+        raise ValueError(f"{n} target objects with up to {max_instances} instances each do not fit the uint8 merged "
+                         f"masks (at most {255 // max_instances} targets)")
+    return dict(zip(names, codes))
 
 #: At most this many instances of one object per scene (section III-C).
 MAX_INSTANCES_PER_OBJECT = 4

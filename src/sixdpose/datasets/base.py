@@ -29,7 +29,9 @@ class Instance:
 
     Attributes:
         obj_name: model name, e.g. ``"006_mustard_bottle"`` (BOP: ``"obj_000005"``).
-        obj_id: integer object id (synthetic: 1-based index in ``TARGET_OBJECTS``; BOP: its id).
+        obj_id: integer object id (synthetic: 1-based index in ``TARGET_OBJECTS`` for the paper's
+            targets, the position in ``target_objects`` for another YCB set, the BOP id for BOP-model
+            targets; BOP: its id).
         inst: instance number of this object within the scene (0-based).
         R: (3, 3) float64 rotation of ``X_CO``.
         t: (3,) float64 translation of ``X_CO`` in metres.

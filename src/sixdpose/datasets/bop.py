@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +52,86 @@ def load_json(path: Path):
 
 def _is_symmetric(info: dict) -> bool:
     return bool(info.get("symmetries_discrete")) or bool(info.get("symmetries_continuous"))
+
+
+@dataclass(frozen=True)
+class BopCamera:
+    """Intrinsics of a BOP camera file: ``fx, fy, cx, cy`` in pixels (integer pixel-centre
+    convention, as ``cam_K``), ``width, height`` in pixels or None where the file does not say."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int | None
+    height: int | None
+
+
+def load_bop_camera(path: str | Path) -> BopCamera:
+    """Read the camera of a BOP ``camera.json`` (``fx fy cx cy width height``, or a ``cam_K``) or of a
+    ``scene_camera.json`` (per image ``cam_K``; the lowest image id's is used, and a warning is logged if
+    other images have another K).
+
+    ``scene_camera.json`` has no image size; it is taken from the first image in ``rgb/`` (or
+    ``gray/``) beside the file when there is one, else left None.
+
+    Raises:
+        DatasetError: one line naming the file: missing, corrupt, no ``cam_K`` (nor ``fx, fy, cx,
+            cy``), or a ``cam_K`` that is not 9 numbers.
+    """
+    path = Path(path)
+    d = load_json(path)
+    if not isinstance(d, dict):
+        raise DatasetError(f"{path}: expected a JSON object")
+
+    def k_of(entry, where):
+        try:
+            K = np.asarray(entry["cam_K"], dtype=np.float64).reshape(3, 3)
+        except (ValueError, TypeError):
+            raise DatasetError(f"{path}: {where}cam_K is not 9 numbers") from None
+        return float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
+
+    size = (None, None)
+    if "cam_K" in d:
+        fx, fy, cx, cy = k_of(d, "")
+    elif all(k in d for k in ("fx", "fy", "cx", "cy")):
+        try:
+            fx, fy, cx, cy = (float(d[k]) for k in ("fx", "fy", "cx", "cy"))
+        except (TypeError, ValueError):
+            raise DatasetError(f"{path}: fx, fy, cx, cy must be numbers") from None
+    else:
+        entries = {}
+        for key, v in d.items():
+            if isinstance(v, dict) and str(key).isdigit():
+                entries[int(key)] = v
+        with_k = {k: v for k, v in entries.items() if "cam_K" in v}
+        if not with_k:
+            raise DatasetError(f"{path}: no cam_K (a camera.json needs fx, fy, cx, cy or cam_K; a scene_camera.json "
+                               "a cam_K per image)")
+        first = min(with_k)
+        fx, fy, cx, cy = k_of(with_k[first], f"image {first}: ")
+        others = {k_of(v, f"image {k}: ") for k, v in with_k.items()} - {(fx, fy, cx, cy)}
+        if others:
+            log.warning("%s: images have %d different cam_K; using image %d's", path, len(others) + 1, first)
+        for sub in ("rgb", "gray"):
+            imgs = sorted((path.parent / sub).glob("*")) if (path.parent / sub).is_dir() else []
+            if imgs:
+                from PIL import Image
+
+                try:
+                    with Image.open(imgs[0]) as im:
+                        size = im.size
+                except Exception:
+                    pass
+                break
+    if "width" in d and "height" in d:
+        try:
+            size = (int(d["width"]), int(d["height"]))
+        except (TypeError, ValueError):
+            raise DatasetError(f"{path}: width and height must be integers") from None
+    if not (fx > 0 and fy > 0):
+        raise DatasetError(f"{path}: focal lengths must be positive, got fx={fx}, fy={fy}")
+    return BopCamera(fx, fy, cx, cy, size[0], size[1])
 
 
 class BopDataset:

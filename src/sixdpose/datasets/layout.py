@@ -7,9 +7,11 @@ Layout of a dataset directory ``D``::
     D/RGB/#.png                      640x480 RGB (uint8)
     D/depth/#.npy                    float32 depth in metres, 0.0 where no surface is within range
     D/masks/<object>/#_<inst>.png    binary visible mask (0/255) of one target instance
-    D/merged_masks/#.png             uint8, value = code(object) - instance (paper codes)
+    D/merged_masks/#.png             uint8, value = code(object) - instance (paper codes; other target
+                                     sets: sixdpose.constants.merged_mask_codes)
     D/models/<object>.ply            coloured reference point cloud (metres, with normals)
-    D/models/models_info.yml         per object: obj_id, diameter, bounding box, symmetric
+    D/models/models_info.yml         per object: obj_id, diameter, bounding box, symmetric, mask_code,
+                                     source (ycb or the BOP model file) and source_sha256 (BOP)
     D/gt.yml                         per image: scene_id, cam_K and, per visible target instance,
                                      obj_name, obj_id, inst, R (3x3, X_CO), t (metres), px_visib
     D/manifest.json                  who wrote it (generator, version, config, scenes ...)
@@ -100,17 +102,19 @@ def merged_mask(shape: tuple[int, int], instances, codes: dict[str, int] = MERGE
     return merged
 
 
-def image_files(im_id: int, rgb: np.ndarray, depth: np.ndarray, instances) -> dict[str, bytes]:
+def image_files(im_id: int, rgb: np.ndarray, depth: np.ndarray, instances, codes: dict[str, int] | None = None) -> dict[str, bytes]:
     """Encode one image into ``{relative path: bytes}`` of the layout.
 
     Args:
         im_id: global image number. rgb: (H, W, 3) uint8. depth: (H, W) metres.
         instances: list of ``(obj_name, inst, mask (H, W) bool)`` of the visible target instances.
+        codes: object name -> merged-mask code (default: the paper's codes of its 18 targets; other
+            target sets: :func:`sixdpose.constants.merged_mask_codes`).
     """
     files = {rgb_file(im_id): png_bytes(rgb), depth_file(im_id): npy_bytes(np.asarray(depth).astype(np.float32))}
     for name, inst, mask in instances:
         files[mask_file(name, im_id, inst)] = png_bytes(mask.astype(np.uint8) * 255)
-    files[merged_mask_file(im_id)] = png_bytes(merged_mask(np.asarray(depth).shape, instances))
+    files[merged_mask_file(im_id)] = png_bytes(merged_mask(np.asarray(depth).shape, instances, MERGED_MASK_CODES if codes is None else codes))
     return files
 
 

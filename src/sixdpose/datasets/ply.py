@@ -29,7 +29,7 @@ import numpy as np
 from ..fileio import atomic_write_bytes
 from .base import DatasetError
 
-__all__ = ["PlyData", "read_ply", "write_ply", "sample_texture"]
+__all__ = ["PlyData", "read_ply", "write_ply", "sample_texture", "read_ply_header_comments"]
 
 # PLY scalar type name -> numpy type code (without byte order)
 _PLY_TYPES = {
@@ -62,6 +62,8 @@ class PlyData:
             file has no face element.
         texture_file: path of the texture named by ``comment TextureFile`` (resolved beside the
             PLY), whether or not it could be read; ``None`` if the header names none.
+        uvs: (N, 2) float64 per-vertex texture coordinates as stored (``texture_u texture_v``, ``s t``
+            or ``u v``; OBJ/OpenGL convention, v = 0 is the bottom row of the texture), or ``None``.
     """
 
     vertices: np.ndarray
@@ -69,6 +71,7 @@ class PlyData:
     colors: np.ndarray | None = None
     faces: np.ndarray | None = None
     texture_file: Path | None = None
+    uvs: np.ndarray | None = None
 
 
 @dataclass
@@ -366,6 +369,18 @@ def _texture_name(comments: list[str]) -> str | None:
     return None
 
 
+def read_ply_header_comments(raw: bytes, key: str) -> str | None:
+    """The value of the first header line ``comment <key> <value>`` of PLY bytes ``raw`` (``key``
+    compared case-insensitively, e.g. ``"TextureFile"``), or ``None`` if the header has none."""
+    end = raw.find(b"end_header")
+    head = raw[: end if end >= 0 else min(len(raw), 65536)].decode("latin-1")
+    for line in head.splitlines():
+        tok = line.strip().split(None, 2)
+        if len(tok) == 3 and tok[0] == "comment" and tok[1].lower() == key.lower():
+            return tok[2].strip()
+    return None
+
+
 def read_ply(path: str | Path) -> PlyData:
     """Read a PLY point cloud or triangle mesh (pure numpy, no Open3D).
 
@@ -379,7 +394,7 @@ def read_ply(path: str | Path) -> PlyData:
         path: the ``.ply`` file (ascii, binary_little_endian or binary_big_endian).
     Returns:
         :class:`PlyData` with vertices (N, 3) float64 in the file's units (BOP: mm), normals,
-        colours in [0, 1], faces (F, 3) int64 and the texture path.
+        colours in [0, 1], faces (F, 3) int64, the texture path and the per-vertex uvs.
     Raises:
         DatasetError: one line naming the file: missing file, not a PLY, malformed header, unknown
             format or type, no vertex element, no x/y/z, truncated data, non-numeric ascii data,
@@ -432,13 +447,12 @@ def read_ply(path: str | Path) -> PlyData:
     tex_name = _texture_name(comments)
     if tex_name is not None:
         texture_file = path.parent / tex_name
-    if colors is None and texture_file is not None:
-        uvn = next((cn for cn in _UV_NAMES if all(c in vert and vprops[c].count_dtype is None for c in cn)), None)
-        if uvn is not None:
-            tex = _load_texture(texture_file, path)
-            if tex is not None:
-                uv = np.stack([vert[uvn[0]], vert[uvn[1]]], axis=1).astype(np.float64)
-                colors = sample_texture(tex, uv)[:, :3]
+    uvn = next((cn for cn in _UV_NAMES if all(c in vert and vprops[c].count_dtype is None for c in cn)), None)
+    uvs = None if uvn is None else np.stack([vert[uvn[0]], vert[uvn[1]]], axis=1).astype(np.float64)
+    if colors is None and texture_file is not None and uvs is not None:
+        tex = _load_texture(texture_file, path)
+        if tex is not None:
+            colors = sample_texture(tex, uvs)[:, :3]
     faces = None
     if "face" in data:
         fprops = elements[names.index("face")].props
@@ -450,7 +464,7 @@ def read_ply(path: str | Path) -> PlyData:
             raise DatasetError(
                 f"{path}: face vertex index out of range [0, {n}) (min {faces.min()}, max {faces.max()})"
             )
-    return PlyData(vertices, normals, colors, faces, texture_file)
+    return PlyData(vertices, normals, colors, faces, texture_file, uvs)
 
 
 def _load_texture(texture_file: Path, ply_path: Path) -> np.ndarray | None:

@@ -10,26 +10,52 @@ from ..assets import load_catalog, load_mesh, resolve_assets_dir
 from ..datasets.geometry import backproject
 
 
-def gt_surface_errors(dataset_dir: str | Path, assets: str | Path | None = None, max_images: int | None = None) -> list[dict]:
+def _mesh_source(root: Path, assets, bop_models):
+    """name -> mesh loader for a dataset's objects: YCB meshes by name, and for targets whose
+    ``models_info.yml`` ``source`` is a BOP PLY the original PLY in ``bop_models`` (mm -> m)."""
+    from ..assets import MeshData
+    from ..datasets.ply import read_ply
+    from ..datasets.synthetic import load_yaml
+
+    catalog = load_catalog(resolve_assets_dir(assets))
+    info = load_yaml(root / "models" / "models_info.yml") or {}
+
+    def mesh(name: str) -> MeshData:
+        src = str((info.get(name) or {}).get("source", "ycb"))
+        if src.endswith(".ply"):
+            if bop_models is None:
+                raise ValueError(f"{name} is a BOP model ({src}): pass bop_models")
+            ply = read_ply(Path(bop_models) / src)
+            return MeshData(ply.vertices / 1000.0, ply.faces, None, None)
+        return load_mesh(catalog[name].obj_path, with_texture=False)
+
+    return mesh
+
+
+def gt_surface_errors(dataset_dir: str | Path, assets: str | Path | None = None, max_images: int | None = None,
+                      bop_models: str | Path | None = None) -> list[dict]:
     """For every annotated instance: mean and median distance (metres) between its back-projected
     masked depth, moved into the object frame with the inverse GT pose, and the mesh surface.
 
+    The mesh is the YCB mesh of the object, or for BOP targets the original BOP PLY in ``bop_models``
+    (converted from mm to m), so the check is against the BOP model frame itself.
+
     Returns:
-        list of ``{"im_id", "obj_name", "inst", "n", "mean", "median"}``.
+        list of ``{"im_id", "obj_name", "obj_id", "inst", "n", "mean", "median"}``.
     """
     import open3d as o3d
 
     from ..datasets.synthetic import SyntheticDataset
 
     ds = SyntheticDataset(dataset_dir)
-    catalog = load_catalog(resolve_assets_dir(assets))
+    mesh_of = _mesh_source(Path(dataset_dir), assets, bop_models)
     scenes: dict[str, o3d.t.geometry.RaycastingScene] = {}
     out = []
     for key in ds.keys()[: max_images or None]:
         s = ds.load(key)
         for inst in s.instances:
             if inst.obj_name not in scenes:
-                m = load_mesh(catalog[inst.obj_name].obj_path, with_texture=False)
+                m = mesh_of(inst.obj_name)
                 rs = o3d.t.geometry.RaycastingScene()
                 rs.add_triangles(o3d.core.Tensor(m.vertices.astype(np.float32)), o3d.core.Tensor(m.faces.astype(np.uint32)))
                 scenes[inst.obj_name] = rs
@@ -38,7 +64,7 @@ def gt_surface_errors(dataset_dir: str | Path, assets: str | Path | None = None,
                 continue
             p_O = (p_C - inst.t) @ inst.R  # R^T (p - t)
             d = scenes[inst.obj_name].compute_distance(o3d.core.Tensor(p_O.astype(np.float32))).numpy()
-            out.append({"im_id": s.im_id, "obj_name": inst.obj_name, "inst": inst.inst, "n": len(d),
+            out.append({"im_id": s.im_id, "obj_name": inst.obj_name, "obj_id": inst.obj_id, "inst": inst.inst, "n": len(d),
                         "mean": float(d.mean()), "median": float(np.median(d))})
     return out
 
@@ -71,8 +97,9 @@ def box_penetration(X_a: np.ndarray, size_a: np.ndarray, X_b: np.ndarray, size_b
     return float(best)
 
 
-def resting_penetrations(dataset_dir: str | Path, assets: str | Path | None = None) -> dict:
-    """Worst penetrations after settling, from the final poses in ``manifest.json``.
+def resting_penetrations(dataset_dir: str | Path, assets: str | Path | None = None, bop_models: str | Path | None = None) -> dict:
+    """Worst penetrations after settling, from the final poses in ``manifest.json`` (``bop_models``:
+    the BOP models directory of a dataset with BOP targets).
 
     Returns:
         ``{"table": metres the lowest contact point of an object on the table lies below the table
@@ -86,7 +113,7 @@ def resting_penetrations(dataset_dir: str | Path, assets: str | Path | None = No
     root = Path(dataset_dir)
     man = json.loads((root / "manifest.json").read_text())
     cfg = GenerationConfig.from_dict(man["config"])
-    catalog = load_catalog(resolve_assets_dir(assets))
+    mesh_of = _mesh_source(root, assets, bop_models)
     worst_table, worst_pair, pair = 0.0, 0.0, None
     hx, hy = cfg.table_size[0] / 2, cfg.table_size[1] / 2
     for scene in man["scenes"].values():
@@ -94,7 +121,7 @@ def resting_penetrations(dataset_dir: str | Path, assets: str | Path | None = No
         for o in scene["objects"]:
             if o["left_scene"]:
                 continue
-            pr = physical_properties(load_mesh(catalog[o["name"]].obj_path, with_texture=False), catalog[o["name"]].mass)
+            pr = physical_properties(mesh_of(o["name"]), 1.0)  # the box only: the mass does not matter
             X = np.eye(4)
             X[:3, :3] = np.asarray(o["R_WO"])
             X[:3, 3] = o["t_WO"]

@@ -5,10 +5,15 @@ Units: metres, seconds, degrees where the name says ``_deg``.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
+from ..assets.bop import BOP_YCB_MAPS, bop_name
 from ..config import Config, from_profile
 from .sensors import SENSORS
+
+#: Values of ``GenerationConfig.target_source``.
+TARGET_SOURCES = ("ycb", "bop")
 
 
 @dataclass(frozen=True)
@@ -21,7 +26,13 @@ class CameraConfig(Config):
 
     Attributes:
         width, height: image size in pixels (640 x 480).
-        fov_y_deg: vertical field of view, degrees.
+        fov_y_deg: vertical field of view, degrees (used when ``intrinsics`` is None).
+        intrinsics: ``(fx, fy, cx, cy)`` in pixels, or None (then the focal length follows from
+            ``fov_y_deg`` and the principal point is the image centre). Integer pixel-centre convention
+            (pixel (u, v) back-projects with depth z to ``((u - cx) z / fx, (v - cy) z / fy, z)``), the
+            convention of ``cam_K`` in ``gt.yml`` and of BOP's ``cam_K``: the renderer, ``gt.yml`` and every
+            reader use this K. :func:`camera_from_bop` reads it from a BOP ``camera.json`` or
+            ``scene_camera.json`` (YCB-Video: 640 x 480, (1066.778, 1067.487, 312.9869, 241.3109)).
         distance_range: (min, max) horizontal distance to the look-at point, metres.
         height_range: (min, max) camera height above the table top, metres.
         arc_span_deg: (min, max) azimuth swept between the first and the last view, degrees.
@@ -33,6 +44,7 @@ class CameraConfig(Config):
     width: int = 640
     height: int = 480
     fov_y_deg: float = 45.0
+    intrinsics: tuple[float, float, float, float] | None = None
     distance_range: tuple[float, float] = (0.55, 1.3)
     height_range: tuple[float, float] = (0.25, 1.1)
     arc_span_deg: tuple[float, float] = (45.0, 180.0)
@@ -47,6 +59,16 @@ class CameraConfig(Config):
             raise ValueError("image size must be at least 8x8")
         if not 0 < self.fov_y_deg < 180:
             raise ValueError(f"fov_y_deg must be in (0, 180), got {self.fov_y_deg}")
+        if self.intrinsics is not None:
+            try:
+                fx, fy, cx, cy = (float(v) for v in self.intrinsics)
+            except (TypeError, ValueError):
+                raise ValueError(f"camera.intrinsics must be (fx, fy, cx, cy) in pixels, got {self.intrinsics!r}") from None
+            if not (fx > 0 and fy > 0):
+                raise ValueError(f"camera.intrinsics: fx and fy must be > 0, got {fx}, {fy}")
+            if not (0 <= cx < self.width and 0 <= cy < self.height):
+                raise ValueError(f"camera.intrinsics: principal point ({cx}, {cy}) outside the {self.width}x{self.height} image")
+            object.__setattr__(self, "intrinsics", (fx, fy, cx, cy))
         if not 0 < self.near < self.far:
             raise ValueError(f"need 0 < near < far, got near={self.near}, far={self.far}")
 
@@ -77,6 +99,28 @@ class GenerationConfig(Config):
         sensor: depth sensor model applied to every rendered view before it is written
             (:mod:`sixdpose.generation.sensors`: ``ideal`` (the paper's perfect depth), ``kinect``,
             ``realsense``, ``azure``), seeded from (seed, scene, view); masks and poses stay exact.
+        target_source: where the target objects come from: ``"ycb"`` (the YCB google_16k meshes of
+            the asset directory, ``--assets``) or ``"bop"`` (the models of a BOP dataset,
+            ``--assets-bop DIR/models``; ground truth is then in that dataset's model frames and obj_ids).
+            Noise objects are always YCB objects.
+        target_objects: names of the target objects, or None for the default set: the paper's 18 (ycb)
+            or every model of the BOP directory (bop). ycb: YCB names; obj_ids are the paper's for
+            exactly the paper's 18 targets, else the 1-based position in this list. bop: ``obj_NNNNNN``,
+            the integer obj_id, or (with ``bop_ycb_map``) the YCB name; obj_ids are the BOP ids.
+            Merged-mask codes: :func:`sixdpose.constants.merged_mask_codes`.
+        noise_objects: YCB names of the noise pool, or None for every YCB object of the asset
+            directory that is not a target (a BOP target mapped to a YCB name by ``bop_ycb_map``
+            excludes that YCB object: the same physical object is never both).
+        symmetric_objects: names (as in ``target_objects``) of the objects evaluated with ADD-S (names
+            that are not targets are allowed and have no effect), or None for the source's flags (``objects.csv``'s ``symmetric``; BOP: a symmetry in
+            ``models_info.json``). Written to ``models_info.yml`` and used by every later stage.
+        bop_ycb_map: name of a table from the BOP dataset's obj_ids to YCB names
+            (:data:`sixdpose.assets.bop.BOP_YCB_MAPS`: ``ycbv``), or None. With it, masses come from
+            ``objects.csv`` and YCB names are accepted for targets; without it a BOP object weighs
+            :data:`~sixdpose.assets.bop.DEFAULT_DENSITY_KG_M3` x its mesh volume.
+        bop_export: None, or a BOP split name (e.g. ``train_synt``): once every scene is done, the
+            dataset is also written in BOP format to ``<out>/bop/<split>`` (as ``sixdpose export-bop``
+            does; models in mm, the targets' obj_ids).
         camera: the :class:`CameraConfig`.
     """
 
@@ -98,6 +142,12 @@ class GenerationConfig(Config):
     max_attempts: int = 6
     model_points: int = 20000
     sensor: str = "ideal"
+    target_source: str = "ycb"
+    target_objects: tuple[str, ...] | None = None
+    noise_objects: tuple[str, ...] | None = None
+    symmetric_objects: tuple[str, ...] | None = None
+    bop_ycb_map: str | None = None
+    bop_export: str | None = None
     camera: CameraConfig = field(default_factory=CameraConfig)
 
     def validate(self) -> None:
@@ -118,11 +168,45 @@ class GenerationConfig(Config):
             raise ValueError(f"sensor must be one of {', '.join(SENSORS)}, got {self.sensor!r}")
         if self.max_instances < 1:
             raise ValueError(f"max_instances must be >= 1, got {self.max_instances}")
+        if self.target_source not in TARGET_SOURCES:
+            raise ValueError(f"target_source must be one of {', '.join(TARGET_SOURCES)}, got {self.target_source!r}")
+        for name in ("target_objects", "noise_objects", "symmetric_objects"):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            if isinstance(v, (str, int)):
+                v = (v,)
+            items = tuple(str(x).strip() for x in v)
+            if any(not x for x in items):
+                raise ValueError(f"{name}: empty object name in {list(v)}")
+            if len(set(items)) != len(items):
+                raise ValueError(f"{name}: an object is listed twice in {list(items)}")
+            if name == "target_objects" and not items:
+                raise ValueError("target_objects: empty list (use null for the default set)")
+            object.__setattr__(self, name, items)
+        if self.bop_ycb_map is not None and self.bop_ycb_map not in BOP_YCB_MAPS:
+            raise ValueError(f"bop_ycb_map must be one of {', '.join(BOP_YCB_MAPS)} or null, got {self.bop_ycb_map!r}")
+        if self.bop_export is not None and not re.fullmatch(r"[A-Za-z0-9_.-]+", str(self.bop_export)):
+            raise ValueError(f"bop_export must be a split folder name such as train_synt, got {self.bop_export!r}")
 
+
+#: The YCB-Video camera (BOP ``ycbv`` ``camera_uw.json``; the ``train_real`` frames of the YCB-Video
+#: sample): 640 x 480, (fx, fy, cx, cy) in pixels.
+YCBV_CAMERA = CameraConfig(width=640, height=480, intrinsics=(1066.778, 1067.487, 312.9869, 241.3109))
+
+#: The YCB-Video objects with textured BOP models (all but 4 005_tomato_soup_can and 19 051_large_clamp,
+#: which the BOP ``ycbv`` models give untextured).
+YCBV_TARGETS: tuple[str, ...] = tuple(bop_name(k) for k in range(1, 22) if k not in (4, 19))
+
+#: The YCB-Video objects BOP annotates as symmetric (1, 13, 14, 16, 18, 19, 20, 21), less 19 (not a target).
+YCBV_SYMMETRIC: tuple[str, ...] = tuple(bop_name(k) for k in (1, 13, 14, 16, 18, 20, 21))
 
 #: Named profiles. ``smoke``: CI-sized; ``demo``: the laptop-CPU default of ``make demo``;
 #: ``paper``: 25,000 images as in section III-C. ``val`` (seed 100) and ``test`` (seed 300): the fixed
 #: splits on which the hybrid methods' defaults are chosen and then measured (never tuned on ``test``).
+#: ``ycbv``: training data for YCB-Video (seed 700, 60 scenes x 20 views): the 19 textured YCB-Video
+#: BOP models as targets (ground truth in their model frames and obj_ids), the other YCB objects as
+#: noise, the YCB-Video camera, ``kinect`` depth, and a BOP copy in ``<out>/bop/train_synt``.
 PROFILES: dict[str, GenerationConfig] = {
     "smoke": GenerationConfig(scenes=2, views=3, targets=(5, 8), noise=(3, 5)),
     "demo": GenerationConfig(scenes=12, views=20),
@@ -130,7 +214,28 @@ PROFILES: dict[str, GenerationConfig] = {
     "test": GenerationConfig(scenes=10, views=20, seed=300),
     "train": GenerationConfig(scenes=60, views=20, seed=500),
     "paper": GenerationConfig(scenes=1250, views=20),
+    "ycbv": GenerationConfig(scenes=60, views=20, seed=700, target_source="bop", target_objects=YCBV_TARGETS,
+                             symmetric_objects=YCBV_SYMMETRIC, bop_ycb_map="ycbv", sensor="kinect",
+                             bop_export="train_synt", camera=YCBV_CAMERA),
 }
+
+
+def camera_from_bop(path) -> dict:
+    """Camera overrides read from a BOP ``camera.json`` or ``scene_camera.json``
+    (:func:`sixdpose.datasets.bop.load_bop_camera`), as dotted config keys for :func:`profile` /
+    ``--set``: ``camera.intrinsics`` = (fx, fy, cx, cy) in pixels, plus ``camera.width`` /
+    ``camera.height`` where the file (or an image beside a ``scene_camera.json``) gives them.
+
+    Raises:
+        DatasetError: one line naming the file and the missing field (e.g. no ``cam_K``).
+    """
+    from ..datasets.bop import load_bop_camera
+
+    cam = load_bop_camera(path)
+    out = {"camera.intrinsics": (cam.fx, cam.fy, cam.cx, cam.cy)}
+    if cam.width is not None and cam.height is not None:
+        out["camera.width"], out["camera.height"] = cam.width, cam.height
+    return out
 
 
 def profile(name: str, **overrides) -> GenerationConfig:

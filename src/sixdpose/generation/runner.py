@@ -18,11 +18,12 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..assets import AssetError, load_catalog, load_mesh, physical_properties, point_cloud_diameter, resolve_assets_dir, sample_surface
-from ..constants import TARGET_OBJECTS, obj_id_of
+from ..assets import load_mesh, physical_properties, point_cloud_diameter, resolve_assets_dir, sample_surface
+from ..assets.bop import resolve_bop_models_dir
 from .config import GenerationConfig
 from .config import profile as get_profile
-from .scene import camera_arc, default_pools, sample_scene, scene_rng
+from .objects import ObjectSet, resolve_objects
+from .scene import camera_arc, sample_scene, scene_rng
 from .sensors import sensor_rng, simulate_depth
 from ..datasets.layout import model_file, write_models_info
 from ..datasets.ply import write_ply
@@ -45,10 +46,11 @@ _PROPS: dict = {}
 
 
 def _props(catalog, name):
-    if name not in _PROPS:
-        obj = catalog[name]
-        _PROPS[name] = physical_properties(load_mesh(obj.obj_path, with_texture=False), obj.mass)
-    return _PROPS[name]
+    obj = catalog[name]
+    key = (name, str(obj.obj_path), float(obj.mass))
+    if key not in _PROPS:
+        _PROPS[key] = physical_properties(load_mesh(obj.obj_path, with_texture=False), obj.mass)
+    return _PROPS[key]
 
 
 def _flat(a) -> list:
@@ -59,9 +61,12 @@ def _rows(a) -> list:
     return [[float(x) for x in row] for row in np.asarray(a, dtype=np.float64)]
 
 
-def render_scene(root: Path, cfg: GenerationConfig, assets_dir: Path, scene: int) -> dict:
+def render_scene(root: Path, cfg: GenerationConfig, objects: "ObjectSet | Path", scene: int) -> dict:
     """Simulate, render and commit scene ``scene`` into dataset ``root``.
 
+    Args:
+        root: dataset directory. cfg: its config. objects: the resolved :class:`~.objects.ObjectSet`
+            (or, for YCB targets, the YCB asset directory to resolve it from). scene: scene index.
     Returns:
         ``{"scene", "ok", "images", "seconds", "peak_rss_mb"}`` plus ``"error"`` if the scene failed
         (it then has no record and is retried by the next run).
@@ -70,8 +75,9 @@ def render_scene(root: Path, cfg: GenerationConfig, assets_dir: Path, scene: int
     try:
         from .sim import SceneSimulator, intrinsics, set_catalogue
 
-        catalog = load_catalog(assets_dir)
-        targets, noise = default_pools(catalog)
+        objset = objects if isinstance(objects, ObjectSet) else resolve_objects(cfg, objects)
+        catalog = objset.catalogue
+        targets, noise, obj_ids = objset.target_names, objset.noise_names, objset.obj_ids
         set_catalogue(catalog)
         K = intrinsics(cfg)
         for attempt in range(cfg.max_attempts):
@@ -101,7 +107,7 @@ def render_scene(root: Path, cfg: GenerationConfig, assets_dir: Path, scene: int
                     continue
                 X_CO = X_CW @ res.X_WO[k]
                 insts.append((s.name, s.inst, mask))
-                objs.append({"obj_name": s.name, "obj_id": obj_id_of(s.name), "inst": s.inst,
+                objs.append({"obj_name": s.name, "obj_id": obj_ids[s.name], "inst": s.inst,
                              "R": _rows(X_CO[:3, :3]), "t": _flat(X_CO[:3, 3]), "px_visib": px})
             views[im_id] = {"rgb": rgb, "depth": depth, "instances": insts}
             images.append({"im_id": im_id, "cam_K": _rows(K), "cam_R_WC": _rows(X_WC[:3, :3]),
@@ -115,7 +121,7 @@ def render_scene(root: Path, cfg: GenerationConfig, assets_dir: Path, scene: int
         record = {"scene": scene, "attempt": attempt, "sim_time": round(res.sim_time, 6),
                   "image_range": [scene * cfg.views, scene * cfg.views + cfg.views - 1],
                   "objects": objects, "images": images}
-        commit_scene(root, scene, scene_files(views), record)
+        commit_scene(root, scene, scene_files(views, objset.codes), record)
         return {"scene": scene, "ok": True, "images": cfg.views, "seconds": time.perf_counter() - t0,
                 "cpu_seconds": time.process_time() - c0, "attempts": attempt + 1,
                 "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
@@ -143,29 +149,56 @@ def _worker_init():
 
 
 def _worker(args):
-    root, cfg_dict, assets_dir, scene = args
-    return render_scene(Path(root), GenerationConfig.from_dict(cfg_dict), Path(assets_dir), scene)
+    root, cfg_dict, objects, scene = args
+    return render_scene(Path(root), GenerationConfig.from_dict(cfg_dict), objects, scene)
 
 
 # ----------------------------------------------------------------------------------------------
 # models, validation, driver
 # ----------------------------------------------------------------------------------------------
-def write_models(root: Path, cfg: GenerationConfig, catalog) -> None:
-    """Write ``models/<target>.ply`` (coloured, with normals, metres) and ``models/models_info.yml``."""
+def _source_entry(t) -> dict:
+    return {"source": t.source, **({"source_sha256": t.sha256} if t.sha256 else {})}
+
+
+def write_models(root: Path, cfg: GenerationConfig, objects: ObjectSet) -> None:
+    """Write ``models/<target>.ply`` (coloured, with normals, metres, in the target's model frame: the
+    YCB mesh frame or the BOP model frame) and ``models/models_info.yml`` (per target: ``obj_id``,
+    ``diameter`` and bounding box in metres, ``symmetric``, ``mask_code``, ``source``, and for BOP
+    models ``source_sha256``)."""
     info = {}
-    for name in TARGET_OBJECTS:
-        mesh = load_mesh(catalog[name].obj_path)
-        pts, nrm, col = sample_surface(mesh, cfg.model_points, seed=obj_id_of(name))
-        write_ply(root / model_file(name), pts, nrm, col, comment="sixdpose reference model, metres")
+    for t in objects.targets:
+        mesh = load_mesh(t.obj_path)
+        pts, nrm, col = sample_surface(mesh, cfg.model_points, seed=t.obj_id)
+        write_ply(root / model_file(t.name), pts, nrm, col, comment="sixdpose reference model, metres")
         lo, hi = mesh.vertices.min(0), mesh.vertices.max(0)
-        info[name] = {
-            "obj_id": obj_id_of(name),
+        info[t.name] = {
+            "obj_id": int(t.obj_id),
             "diameter": float(point_cloud_diameter(mesh.vertices)),
             "min_x": float(lo[0]), "min_y": float(lo[1]), "min_z": float(lo[2]),
             "size_x": float(hi[0] - lo[0]), "size_y": float(hi[1] - lo[1]), "size_z": float(hi[2] - lo[2]),
-            "symmetric": catalog[name].symmetric,
+            "symmetric": bool(t.symmetric),
+            "mask_code": int(objects.codes[t.name]),
+            **_source_entry(t),
         }
     write_models_info(root, info)
+
+
+def check_models(root: Path, objects: ObjectSet) -> None:
+    """Raise :class:`GenerationError` if the dataset's ``models/models_info.yml`` was written for other
+    targets than ``objects`` (other names or obj_ids, or BOP models with other content)."""
+    from ..datasets.synthetic import load_yaml
+
+    path = root / "models" / "models_info.yml"
+    try:
+        info = load_yaml(path) or {}
+        have = {str(k): (int(v["obj_id"]), v.get("source_sha256")) for k, v in info.items()}
+    except (SixdposeError, KeyError, TypeError, ValueError, AttributeError) as e:
+        raise GenerationError(f"{path}: unreadable ({e})") from None
+    want = {t.name: (int(t.obj_id), t.sha256) for t in objects.targets}
+    diff = sorted(n for n in set(have) | set(want) if n not in have or n not in want or have[n][0] != want[n][0]
+                  or (have[n][1] is not None and have[n][1] != want[n][1]))
+    if diff:
+        raise GenerationError(f"{path}: the dataset was made with other target models ({', '.join(diff[:5])}); use another --out")
 
 
 def prepare_output(out: Path, cfg: GenerationConfig) -> bool:
@@ -200,6 +233,8 @@ def generate(
     executor: str = "local",
     address: str | None = None,
     progress: bool = True,
+    assets_bop: str | os.PathLike | None = None,
+    cache_dir: str | os.PathLike | None = None,
 ) -> dict:
     """Generate (or finish, or extend) a dataset in ``out``.
 
@@ -212,32 +247,36 @@ def generate(
         executor: ``"local"`` or ``"ray"``.
         address: Ray cluster address (``None``: start a local instance).
         progress: show a progress bar on stderr.
+        assets_bop: BOP ``models/`` directory of the targets when ``cfg.target_source == "bop"``
+            (default: :func:`sixdpose.assets.bop.resolve_bop_models_dir`).
+        cache_dir: cache of converted BOP models (default :func:`sixdpose.assets.bop.default_cache_dir`).
     Returns:
         summary dict: ``scenes_done``, ``scenes_failed`` (list of {scene, error}), ``images``,
         ``seconds`` (wall), ``images_per_s``, ``cpu_seconds`` (summed over the scene workers),
-        ``peak_rss_mb`` (largest worker), ``manifest``.
+        ``peak_rss_mb`` (largest worker), ``manifest``, ``bop_export`` (path or None).
     Raises:
-        GenerationError, AssetError: bad arguments (nothing is written then).
+        GenerationError, AssetError, ConfigError: bad arguments (nothing is written then).
     """
     if workers < 1:
         raise GenerationError(f"--workers must be >= 1, got {workers}")
     if executor not in ("local", "ray"):
         raise GenerationError(f"--executor must be 'local' or 'ray', got {executor!r}")
+    if assets_bop is not None and cfg.target_source != "bop":
+        raise GenerationError("--assets-bop needs target_source=bop (set by the CLI's --assets-bop)")
     assets_dir = resolve_assets_dir(assets)
-    catalog = load_catalog(assets_dir)
-    try:
-        default_pools(catalog)
-    except KeyError as e:
-        raise AssetError(f"{assets_dir}: {e.args[0]}") from None
+    bop_dir = resolve_bop_models_dir(assets_bop, cfg.bop_ycb_map) if cfg.target_source == "bop" else None
+    objects = resolve_objects(cfg, assets_dir, bop_dir, cache_dir)
     out = Path(out)
     resuming = prepare_output(out, cfg)
+    if resuming and (out / "models" / "models_info.yml").is_file():
+        check_models(out, objects)
 
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / CONFIG_FILE, cfg.to_yaml())
     shutil.rmtree(out / PARTIAL, ignore_errors=True)
     (out / RECORDS).mkdir(exist_ok=True)
     if not (out / "models" / "models_info.yml").is_file():
-        write_models(out, cfg, catalog)
+        write_models(out, cfg, objects)
     write_attribution(out, assets_dir)
 
     records = read_records(out)
@@ -249,7 +288,7 @@ def generate(
     bar = tqdm(total=cfg.scenes, initial=cfg.scenes - len(todo), unit="scene", desc="generate",
                disable=not progress, file=sys.stderr, dynamic_ncols=True)
     images = 0
-    for r in _run(todo, out, cfg, assets_dir, workers, executor, address):
+    for r in _run(todo, out, cfg, objects, workers, executor, address):
         results.append(r)
         images += r["images"]
         bar.update(1)
@@ -270,7 +309,11 @@ def generate(
         "attribution": "ATTRIBUTION.txt",
         "failed_scenes": sorted(f["scene"] for f in failed),
     }
-    manifest = finalize(out, read_records(out), head)
+    records = read_records(out)
+    manifest = finalize(out, records, head)
+    exported = None
+    if cfg.bop_export and not failed and len(records) >= cfg.scenes:
+        exported = export_copy(out, cfg.bop_export, manifest["num_images"], progress)
     return {
         "resumed": resuming,
         "scenes_done": sum(r["ok"] for r in results),
@@ -281,7 +324,34 @@ def generate(
         "cpu_seconds": sum(r["cpu_seconds"] for r in results),
         "peak_rss_mb": max((r["peak_rss_mb"] for r in results), default=0.0),
         "manifest": manifest,
+        "bop_export": None if exported is None else str(exported),
     }
+
+
+BOP_COPY = "bop"
+
+
+def export_copy(root: Path, split: str, num_images: int, progress: bool = False) -> Path:
+    """Write the BOP copy of a finished dataset to ``root/bop`` (split ``split``), as
+    :func:`sixdpose.datasets.bop.export_bop` does, unless an up-to-date copy is there (same split and
+    number of images); an outdated or interrupted copy is removed first. Returns ``root/bop``."""
+    import json
+
+    from ..datasets.bop import export_bop
+    from ..datasets.synthetic import SyntheticDataset
+
+    dst = root / BOP_COPY
+    stamp = dst / "sixdpose_export.json"
+    want = {"split": split, "num_images": int(num_images)}
+    try:
+        if json.loads(stamp.read_text()) == want:
+            return dst
+    except (OSError, ValueError):
+        pass
+    shutil.rmtree(dst, ignore_errors=True)
+    export_bop(SyntheticDataset(root), dst, split=split, progress=progress)
+    atomic_write_text(stamp, json.dumps(want) + "\n")
+    return dst
 
 
 def _drake_version() -> str | None:
@@ -293,8 +363,8 @@ def _drake_version() -> str | None:
         return None
 
 
-def _run(todo, out, cfg, assets_dir, workers, executor, address):
-    args = [(str(out), cfg.to_dict(), str(assets_dir), s) for s in todo]
+def _run(todo, out, cfg, objects, workers, executor, address):
+    args = [(str(out), cfg.to_dict(), objects, s) for s in todo]
     if not args:
         return
     if executor == "ray":

@@ -223,7 +223,7 @@ class PoolRenderer:
     @classmethod
     def get(cls, cfg: GenerationConfig) -> "PoolRenderer":
         """The process-wide renderer for ``cfg``'s camera and static scene (rebuilt if they change)."""
-        key = (cfg.camera, cfg.table_size, cfg.table_height, cfg.max_instances)
+        key = (cfg.camera, cfg.table_size, cfg.table_height, cfg.max_instances, tuple(sorted(_ALL_NAMES.items())))
         if cls._instance is None or cls._key != key:
             cls._instance, cls._key = cls(cfg), key
         return cls._instance
@@ -235,7 +235,6 @@ class PoolRenderer:
             SceneGraph,
         )
         from pydrake.systems.framework import DiagramBuilder
-        from pydrake.systems.sensors import CameraInfo
 
         self.cfg = cfg
         builder = DiagramBuilder()
@@ -256,8 +255,7 @@ class PoolRenderer:
         self._builder = builder
         self._diagram = None
         cam = cfg.camera
-        core = RenderCameraCore("vtk", CameraInfo(cam.width, cam.height, np.deg2rad(cam.fov_y_deg)),
-                                ClippingRange(0.01, cam.far + 1), _rt(np.eye(4)))
+        core = RenderCameraCore("vtk", camera_info(cfg), ClippingRange(0.01, cam.far + 1), _rt(np.eye(4)))
         self._color = ColorRenderCamera(core, False)
         self._depth = DepthRenderCamera(core, DepthRange(cam.near, cam.far))
         self._lut = None
@@ -330,12 +328,18 @@ class PoolRenderer:
         return rgb, depth, self._lut[label]
 
 
-_ALL_NAMES: set = set()
+_ALL_NAMES: dict = {}
 
 
-def set_catalogue(names) -> None:
-    """Declare every object name the process may render (frames are made for all of them at once)."""
-    _ALL_NAMES.update(names)
+def set_catalogue(mesh_paths) -> None:
+    """Declare every object the process may render (replacing the previous declaration): name -> mesh
+    path (or just names, rendered with the paths given to :meth:`PoolRenderer.set_scene`). Frames are
+    made for all of them at once; a changed catalogue rebuilds the renderer (:meth:`PoolRenderer.get`)."""
+    _ALL_NAMES.clear()
+    if isinstance(mesh_paths, dict):
+        _ALL_NAMES.update({str(k): str(getattr(v, "obj_path", v)) for k, v in mesh_paths.items()})
+    else:
+        _ALL_NAMES.update({str(k): "" for k in mesh_paths})
 
 
 def mesh_paths_all(mesh_paths: dict) -> set:
@@ -343,21 +347,36 @@ def mesh_paths_all(mesh_paths: dict) -> set:
     return set(_ALL_NAMES) | set(mesh_paths)
 
 
-def intrinsics(cfg: GenerationConfig) -> np.ndarray:
-    """Camera matrix K (3, 3) of the images rendered with ``CameraInfo(width, height, fov_y)``, in the
-    convention used everywhere here: pixel (u, v) (column, row index) has its centre at integer
-    coordinates, so it back-projects with depth z to ``((u - cx) z / fx, (v - cy) z / fy, z)``.
+def camera_info(cfg: GenerationConfig):
+    """Drake ``CameraInfo`` of ``cfg.camera``: from ``intrinsics`` (fx, fy, cx, cy) when given, else
+    from the vertical field of view. The renderer uses it and :func:`intrinsics` derives K from it, so
+    the images and ``cam_K`` cannot disagree.
 
-    ``CameraInfo`` reports the principal point ``(width/2 - 0.5, height/2 - 0.5)`` in a convention
-    where pixel u spans [u, u + 1) (centre at u + 0.5); measured on rendered depth (see
-    ``tests/test_generation.py::test_gt_exact``), the integer-centre principal point is therefore
-    ``(width/2 - 1, height/2 - 1)``. Using Drake's value directly shifts back-projected points by half
-    a pixel (about 0.8 mm at 1 m).
+    Drake's principal point lies half a pixel from ours (see :func:`intrinsics`), so explicit
+    intrinsics are passed to Drake as ``(cx + 0.5, cy + 0.5)``.
     """
     from pydrake.systems.sensors import CameraInfo
 
     cam = cfg.camera
-    info = CameraInfo(cam.width, cam.height, np.deg2rad(cam.fov_y_deg))
+    if cam.intrinsics is not None:
+        fx, fy, cx, cy = cam.intrinsics
+        return CameraInfo(cam.width, cam.height, fx, fy, cx + 0.5, cy + 0.5)
+    return CameraInfo(cam.width, cam.height, np.deg2rad(cam.fov_y_deg))
+
+
+def intrinsics(cfg: GenerationConfig) -> np.ndarray:
+    """Camera matrix K (3, 3) of the rendered images (:func:`camera_info`), in the convention used
+    everywhere here: pixel (u, v) (column, row index) has its centre at integer coordinates, so it
+    back-projects with depth z to ``((u - cx) z / fx, (v - cy) z / fy, z)``.
+
+    ``CameraInfo`` reports the principal point ``(width/2 - 0.5, height/2 - 0.5)`` in a convention
+    where pixel u spans [u, u + 1) (centre at u + 0.5); measured on rendered depth (see
+    ``tests/test_generation.py::test_gt_exact``), the integer-centre principal point is therefore
+    ``(width/2 - 1, height/2 - 1)``: ours is Drake's minus 0.5. Using Drake's value directly shifts
+    back-projected points by half a pixel (about 0.8 mm at 1 m). With ``camera.intrinsics`` set, K is
+    exactly those values.
+    """
+    info = camera_info(cfg)
     return np.array(
         [[info.focal_x(), 0, info.center_x() - 0.5], [0, info.focal_y(), info.center_y() - 0.5], [0, 0, 1.0]]
     )

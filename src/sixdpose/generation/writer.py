@@ -21,17 +21,18 @@ RECORDS = ".scenes"
 PARTIAL = ".partial"
 
 
-def scene_files(views: dict) -> dict[str, bytes]:
+def scene_files(views: dict, codes: dict[str, int] | None = None) -> dict[str, bytes]:
     """Encode one scene's rendered views into ``{relative path: bytes}`` of the layout
     (:func:`sixdpose.datasets.layout.image_files`).
 
     Args:
         views: im_id -> dict with ``rgb`` (H, W, 3) uint8, ``depth`` (H, W) float32 metres,
             ``instances``: list of (obj_name, inst, mask (H, W) bool).
+        codes: target name -> merged-mask code (default: the paper's).
     """
     files: dict[str, bytes] = {}
     for im_id, v in views.items():
-        files.update(image_files(im_id, v["rgb"], v["depth"], v["instances"]))
+        files.update(image_files(im_id, v["rgb"], v["depth"], v["instances"], codes))
     return files
 
 
