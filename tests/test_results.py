@@ -22,6 +22,13 @@ REPO = Path(__file__).resolve().parents[1]
 # --------------------------------------------------------------------------------------------
 # the README's generated tables are what results/ generates
 # --------------------------------------------------------------------------------------------
+def test_readme_blocks_match_results():
+    text = (REPO / "README.md").read_text()
+    assert "<!-- results:" in text, "README.md has no generated result blocks"
+    stale = stale_blocks(REPO / "README.md", REPO / "results")
+    assert stale == [], f"README blocks {stale} differ from results/: run `make results-readme`"
+
+
 def test_every_result_file_reads():
     names = sorted(p.stem for p in (REPO / "results").glob("*.json"))
     for n in names:
@@ -139,7 +146,12 @@ Some text.
 | stale | table |
 <!-- /results:bench -->
 
-More text.
+More text, and an example that is not a block:
+
+```
+<!-- results:example -->
+<!-- /results:example -->
+```
 """
 
 
@@ -156,7 +168,7 @@ def test_readme_rewrite_and_check(tmp_path, capsys):
     text = readme.read_text()
     assert "| method | acc (%) |\n|---|---|\n| ransac | 93.46 |\n| fgr | – |" in text
     assert "`results/bench.json`" in text and text.startswith("# Title\n\nSome text.\n\n<!-- results:bench -->\n|")
-    assert text.endswith(".</sub>\n<!-- /results:bench -->\n\nMore text.\n")
+    assert ".</sub>\n<!-- /results:bench -->\n\nMore text" in text and text.endswith(README.split("More text")[1])
     assert readme_main(args + ["--check"]) == 0
     assert readme_main(args) == 0 and readme.read_text() == text  # idempotent
 

@@ -35,8 +35,23 @@ from ..fileio import atomic_write_text
 from ..paper import TABLES, paper_figure
 from .results import Result, read_result
 
-_OPEN = re.compile(r"<!-- results:([A-Za-z0-9_.-]+) -->")
+_OPEN = re.compile(r"^<!-- results:([A-Za-z0-9_.-]+) -->[ \t]*$", re.M)
 _CLOSE = "<!-- /results:{} -->"
+_FENCE = re.compile(r"^[ \t]*(```|~~~)", re.M)
+
+
+def _fenced(text: str) -> list[tuple[int, int]]:
+    """``(start, end)`` character ranges of the fenced code blocks of ``text`` (markers there are examples)."""
+    out, start = [], None
+    for m in _FENCE.finditer(text):
+        if start is None:
+            start = m.start()
+        else:
+            out.append((start, m.end()))
+            start = None
+    if start is not None:
+        out.append((start, len(text)))
+    return out
 
 
 class ReadmeError(SixdposeError):
@@ -212,14 +227,19 @@ def render_block(name: str, results_dir: str | Path) -> str:
 # --------------------------------------------------------------------------------------------
 def blocks(text: str, where: str = "README") -> list[tuple[str, int, int]]:
     """``(name, start, end)`` of every generated block of ``text``: the body between the end of the
-    opening marker's line and the start of the closing marker.
+    opening marker's line and the start of the closing marker. Markers count on a line of their own and
+    outside fenced code blocks (where they are examples).
 
     Raises:
         ReadmeError: a block without its closing marker, or a marker inside another block.
     """
     out = []
     pos = 0
+    fences = _fenced(text)
     while (m := _OPEN.search(text, pos)) is not None:
+        if any(a <= m.start() < b for a, b in fences):
+            pos = m.end()
+            continue
         name = m.group(1)
         close = _CLOSE.format(name)
         end = text.find(close, m.end())

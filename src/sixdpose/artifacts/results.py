@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import SixdposeError
-from ..fileio import atomic_write_json, atomic_write_text
+from ..fileio import atomic_write_text
 
 FORMAT = "sixdpose-result"
 VERSION = 1
