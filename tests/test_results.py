@@ -130,7 +130,7 @@ def test_bad_values_are_refused_before_anything_is_written(tmp_path):
         write_result("x", {"model": object()}, results_dir=tmp_path)
     with pytest.raises(ResultError, match="every row must be a dict"):
         write_result("x", [1, 2], results_dir=tmp_path)
-    with pytest.raises(ResultError, match="data must be a dict"):
+    with pytest.raises(ResultError, match="content must be a dict"):
         write_result("x", "93 %", results_dir=tmp_path)
     assert list(tmp_path.iterdir()) == []
 

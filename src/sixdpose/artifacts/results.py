@@ -301,16 +301,16 @@ def _csv_text(rows: list[dict]) -> str:
     return buf.getvalue()
 
 
-def write_result(name: str, data=None, *, rows=None, units: dict | None = None, description: str = "",
+def write_result(name: str, content=None, *, rows=None, units: dict | None = None, description: str = "",
                  results_dir: str | Path = DEFAULT_DIR, command: list[str] | None = None, config=None,
                  inputs: list | None = None, notes: str | None = None, csv_table: bool = True) -> Path:
     """Write result ``name`` to ``<results_dir>/<name>.json`` atomically, with its provenance.
 
     Args:
         name: file stem (letters, digits, ``_ - .``), e.g. ``"registration_val"``.
-        data: the figures: a dict of scalars, or a list of row dicts (or a ``pandas.DataFrame``) when
+        content: the figures: a dict of scalars, or a list of row dicts (or a ``pandas.DataFrame``) when
             the result is a table only.
-        rows: the table when ``data`` is a dict of figures (e.g. an evaluation's per-object rows).
+        rows: the table when ``content`` is a dict of figures (e.g. an evaluation's per-object rows).
         units: unit of each figure / column that has one, e.g. ``{"accuracy": "%", "fps": "frames/s"}``.
         description: one line saying what was measured on what.
         results_dir: directory (created). command: the producing command line (default ``sys.argv``).
@@ -324,18 +324,18 @@ def write_result(name: str, data=None, *, rows=None, units: dict | None = None, 
         ResultError: a bad name, or a value that is not plain data.
     """
     path = result_path(name, results_dir)
-    if hasattr(data, "to_dict") and not isinstance(data, dict):  # pandas.DataFrame
-        data = data.to_dict("records")
+    if hasattr(content, "to_dict") and not isinstance(content, dict):  # pandas.DataFrame
+        content = content.to_dict("records")
     if hasattr(rows, "to_dict"):
         rows = rows.to_dict("records")
-    if isinstance(data, list):
+    if isinstance(content, list):
         if rows is not None:
-            raise ResultError(f"result {name}: give the table either as data or as rows, not both")
-        figures, rows = {}, data
-    elif data is None or isinstance(data, dict):
-        figures, rows = dict(data or {}), list(rows or [])
+            raise ResultError(f"result {name}: give the table either as content or as rows, not both")
+        figures, rows = {}, content
+    elif content is None or isinstance(content, dict):
+        figures, rows = dict(content or {}), list(rows or [])
     else:
-        raise ResultError(f"result {name}: data must be a dict of figures or a list of row dicts, not {type(data).__name__}")
+        raise ResultError(f"result {name}: content must be a dict of figures or a list of row dicts, not {type(content).__name__}")
     if not all(isinstance(r, dict) for r in rows):
         raise ResultError(f"result {name}: every row must be a dict (column -> value)")
     doc = {
@@ -421,11 +421,11 @@ def add_result_arguments(parser, default_name: str | None, default_dir: str | Pa
     g.add_argument("--no-result", action="store_true", help="only print the figures; write no result file")
 
 
-def save_from_args(args, data=None, **kw) -> Path | None:
+def save_from_args(args, content=None, **kw) -> Path | None:
     """:func:`write_result` with the ``--results-dir`` / ``--result-name`` / ``--no-result`` of
     :func:`add_result_arguments`; prints where the result went. Returns the path (None with ``--no-result``)."""
     if args.no_result:
         return None
-    p = write_result(args.result_name, data, results_dir=args.results_dir, **kw)
+    p = write_result(args.result_name, content, results_dir=args.results_dir, **kw)
     print(f"result -> {p}")
     return p
