@@ -4,7 +4,8 @@
 #   make test-fast  the edit loop: tests without Drake generation or slow training (under 2 minutes)
 #   make demo       the whole chain at a small scale on a laptop CPU (data/demo, figures/)
 #   make reproduce  the paper-scale run (GPU machine): 25,000 images, all notebooks
-#   make benchmark  the benchmark scripts (print their figures)
+#   make benchmark  the benchmark scripts (print their figures, write them to results/)
+#   make results-readme  rewrite the README's generated tables from results/ (results-check: only compare)
 
 SHELL := /bin/bash
 PYTHON_SYS ?= python3
@@ -17,7 +18,7 @@ export SIXDPOSE_YCB
 WORKERS ?= 2
 PAPERMILL := $(PY) -m papermill --cwd notebooks --log-output --no-progress-bar
 
-.PHONY: setup apt venv test test-fast notebooks-sync demo reproduce benchmark clean-data
+.PHONY: setup apt venv test test-fast notebooks-sync demo reproduce benchmark results-readme results-check clean-data
 
 setup: apt venv
 
@@ -61,3 +62,10 @@ BENCHMARKS := generation segmentation registration colour_robustness
 
 benchmark: setup
 	@for b in $(BENCHMARKS); do echo "== benchmarks/$$b.py"; $(PY) benchmarks/$$b.py || exit 1; done
+
+# README blocks between <!-- results:NAME --> markers are generated from results/*.json (sixdpose.artifacts.readme)
+results-readme: setup
+	$(PY) -m sixdpose.artifacts.readme --readme README.md --results results
+
+results-check: setup
+	$(PY) -m sixdpose.artifacts.readme --readme README.md --results results --check

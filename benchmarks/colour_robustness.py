@@ -6,6 +6,9 @@ stand-in for another camera's white balance and response), and without the colou
 Usage::
 
     python benchmarks/colour_robustness.py [--data data/val] [--stride 5] [--method ransac]
+        [--results-dir results] [--result-name colour_robustness] [--no-result]
+
+The three rows are also written as the result artifact ``results/colour_robustness.json``.
 """
 
 from __future__ import annotations
@@ -63,6 +66,9 @@ def main(argv=None) -> int:
     ap.add_argument("--data", default=None, help="dataset (default: data/val, generated with the val profile)")
     ap.add_argument("--stride", type=int, default=5)
     ap.add_argument("--method", default="ransac", choices=["ransac", "fgr", "super4pcs"])
+    from sixdpose.artifacts.results import add_result_arguments, save_from_args, script_command
+
+    add_result_arguments(ap, "colour_robustness", Path(__file__).resolve().parents[1] / "results")
     args = ap.parse_args(argv)
 
     from sixdpose.datasets import DatasetReader, open_dataset
@@ -79,11 +85,21 @@ def main(argv=None) -> int:
     perturbed = PerturbedColours(ds)
     assert isinstance(perturbed, DatasetReader)
     idx = range(0, len(ds), args.stride)
+    table = []
     for label, reader, colour in (("rendered RGB", ds, True), ("perturbed RGB", perturbed, True), ("no colour step", ds, False)):
         rows = run_registration(reader, args.method, icp=True, cfg=get_preset("default", colour_verify=colour),
                                 workers=1, min_px=400, progress=False, indices=idx)
         res = evaluate(ds, rows, min_px=400)
         print(f"{args.method}+icp  {label:16s} ADD(-S) {res.accuracy:6.2f}% ({res.n_correct}/{res.n_gt})", flush=True)
+        table.append({"condition": label, "method": args.method + "+icp", "colour_step": colour,
+                      "add_s_accuracy": res.accuracy, "n_correct": res.n_correct, "n_gt": res.n_gt})
+    save_from_args(args, table, command=script_command(__file__, argv),
+                   units={"add_s_accuracy": "%", "n_correct": "GT instances", "n_gt": "GT instances"},
+                   description=f"{args.method} + ICP (default preset, GT masks, >= 400 px, one thread) on every "
+                               f"{args.stride}-th image of {Path(str(data)).name}: rendered RGB, perturbed RGB "
+                               f"(gain 0.75-1.25, gamma 0.8-1.25, noise 6/255), no colour step",
+                   config={"data": str(data), "stride": args.stride, "method": args.method, "min_px": 400,
+                           "preset": get_preset("default").to_dict()})
     return 0
 
 

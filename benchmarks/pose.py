@@ -5,6 +5,7 @@ Usage::
     python benchmarks/pose.py [--profile cpu|smoke|paper] [--pose RUN --refiner RUN2] [--device cpu|cuda]
                               [--instances 6] [--frames 10] [--steps 10] [--threads N] [--json OUT]
                               [--seg SEG_RUN --data DIR]
+                              [--results-dir results] [--result-name pose_<profile>_<device>] [--no-result]
 
 * Training throughput (instances/s): optimiser steps of the main network and of the refiner
   (2 unrolled iterations) for the profile's config and batch size, on synthetic inputs (random crops
@@ -18,6 +19,8 @@ Usage::
   real frames, loaded into memory first: Mask R-CNN on the RGB image, then the pose network and 2
   refinement iterations on every detection of the frame in one batch (section V-A: disk reads excluded).
 * Peak memory: CPU: the process' peak resident set size (MiB); CUDA: ``torch.cuda.max_memory_allocated``.
+
+The figures are also written as the result artifact ``results/pose_<profile>_<device>.json``.
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
+from sixdpose.artifacts.results import add_result_arguments, save_from_args, script_command  # noqa: E402
 from sixdpose.datasets.base import Instance, Sample  # noqa: E402
 from sixdpose.pose import checkpoint as ck  # noqa: E402
 from sixdpose.runs import save_checkpoint  # noqa: E402
@@ -196,7 +200,10 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None)
     ap.add_argument("--seg", default=None, help="a trained segmentation run: also time segmentation + pose end to end")
     ap.add_argument("--data", default=None, help="dataset whose first --frames frames the end-to-end timing uses (with --seg)")
+    add_result_arguments(ap, None, Path(__file__).resolve().parents[1] / "results", "pose_<profile>_<device>")
     a = ap.parse_args(argv)
+    if a.result_name is None:
+        a.result_name = f"pose_{a.profile}_{torch.device(a.device).type}"
     if (a.seg is None) != (a.data is None) or (a.seg and not a.pose):
         print("--seg and --data go together, and need --pose (and --refiner)", file=sys.stderr)
         return 2
@@ -221,6 +228,17 @@ def main(argv=None) -> int:
         print(f"{k:32s} {v:.2f}" if isinstance(v, float) else f"{k:32s} {v}")
     if a.json:
         Path(a.json).write_text(json.dumps(out, indent=1) + "\n")
+    suffix_units = {"instances_per_s": "instances/s", "_fps": "frames/s", "_ms_per_frame": "ms", "_mib": "MiB"}
+    units = {k: u for k in out for end, u in suffix_units.items() if k.endswith(end)}
+    save_from_args(a, out, command=script_command(__file__, argv), units=units,
+                   description=f"learned pose stage ({'trained runs' if a.pose else 'untrained ' + a.profile + ' networks'}) "
+                               f"on {out['device']}: inference FPS with {a.instances} instances per frame "
+                               f"(+ 2 refinement iterations), training instances/s, peak memory"
+                               + ("; end to end with segmentation on " + Path(a.data).name if a.seg else ""),
+                   config={"profile": a.profile, "pose": a.pose, "refiner": a.refiner, "device": a.device,
+                           "instances": a.instances, "frames": a.frames, "steps": a.steps, "threads": a.threads,
+                           "seg": a.seg, "data": a.data,
+                           "pose_config": profile_config(a.profile).to_dict() if not a.pose else None})
     return 0
 
 

@@ -6,12 +6,16 @@ Usage::
 
     python benchmarks/registration.py [--data data/val] [--split test] [--limit N] [--stride K]
         [--methods ransac,fgr,super4pcs] [--presets default,paper] [--paper-stride K]
+        [--results-dir results] [--result-name registration_<data dir name>] [--no-result]
 
 Without ``--data`` the fixed validation split is generated (if missing) with the generator's ``val``
 profile (seed 100, 6 scenes x 20 views) into ``data/val``; the default ``--stride 5`` takes every 5th
 image of it. The ``paper`` preset (full clouds, 2 mm models; several times slower) runs on every
 ``--paper-stride``-th image (default: 4 x ``--stride``), a subset of the same images; each row prints
 its instance count. A BOP root works too.
+
+The table is also written as the result artifact ``results/registration_<data dir name>.json`` (one row
+per preset and method; :mod:`sixdpose.artifacts.results`), with the commit, date, hardware and command.
 """
 
 from __future__ import annotations
@@ -42,6 +46,9 @@ def main(argv=None) -> int:
     ap.add_argument("--csv", default=None, help="also write the table as CSV here")
     ap.add_argument("--symmetric-ids", default=None,
                     help="BOP only: comma-separated obj_ids treated as symmetric (for files without annotations)")
+    from sixdpose.artifacts.results import add_result_arguments, save_from_args, script_command
+
+    add_result_arguments(ap, None, Path(__file__).resolve().parents[1] / "results", "registration_<data dir name>")
     args = ap.parse_args(argv)
 
     from sixdpose.datasets.base import open_dataset
@@ -58,6 +65,8 @@ def main(argv=None) -> int:
         ensure_dataset(data, profile="val")
     kw = {"symmetric_ids": [int(x) for x in args.symmetric_ids.split(",")]} if args.symmetric_ids else {}
     ds = open_dataset(data, split=args.split, **kw)
+    if args.result_name is None:
+        args.result_name = "registration_" + Path(str(data)).name
     table = []
     for preset in args.presets.split(","):
         cfg = get_preset(preset)
@@ -70,7 +79,8 @@ def main(argv=None) -> int:
                                         min_px=args.min_px, progress=False, indices=indices)
                 wall = time.perf_counter() - t0
                 res = evaluate(ds, rows, min_px=args.min_px)
-                table.append((preset, method + ("+icp" if icp else ""), res.accuracy, res.n_gt, res.instances_per_s, res.fps, wall))
+                table.append((preset, method + ("+icp" if icp else ""), res.accuracy, res.n_gt, res.instances_per_s, res.fps, wall,
+                              res.n_correct))
                 print(f"{preset:8s} {table[-1][1]:15s} ADD(-S) {res.accuracy:6.2f}%  ({res.n_correct}/{res.n_gt})  "
                       f"{table[-1][4]:7.2f} inst/s  {res.fps:6.2f} FPS  (wall {wall:.1f}s)", flush=True)
     print("\nmethod            " + "  ".join(f"{p:>31s}" for p in args.presets.split(",")))
@@ -86,6 +96,18 @@ def main(argv=None) -> int:
 
         cols = ["preset", "method", "add_s_accuracy", "n_gt", "instances_per_s_one_core", "fps", "wall_s"]
         write_table([dict(zip(cols, t)) for t in table], cols, args.csv)
+    cols = ["preset", "method", "add_s_accuracy", "n_gt", "instances_per_s_one_core", "fps", "wall_s", "n_correct"]
+    save_from_args(
+        args, [dict(zip(cols, t)) for t in table], command=script_command(__file__, argv),
+        units={"add_s_accuracy": "%", "n_gt": "GT instances", "n_correct": "GT instances",
+               "instances_per_s_one_core": "instances/s", "fps": "frames/s", "wall_s": "s"},
+        description=f"hybrid registration on one core, GT masks, >= {args.min_px} px: ADD(-S) < 0.1 d and instances/s "
+                    f"per preset and method on {Path(str(data)).name} (stride {args.stride}, paper preset stride "
+                    f"{args.paper_stride or 4 * args.stride})",
+        config={"data": str(data), "split": args.split, "limit": args.limit, "stride": args.stride,
+                "paper_stride": args.paper_stride or 4 * args.stride, "min_px": args.min_px,
+                "symmetric_ids": args.symmetric_ids,
+                "presets": {p: get_preset(p).to_dict() for p in args.presets.split(",")}})
     return 0
 
 

@@ -4,6 +4,7 @@ Usage::
 
     python benchmarks/segmentation.py [--ckpt RUN_DIR | --profile paper|smoke] [--data DIR]
                                       [--n-images 8] [--batch-size 1] [--threads N] [--json OUT]
+                                      [--results-dir results] [--result-name segmentation_<profile or run>] [--no-result]
 
 Without ``--ckpt`` an untrained network of the profile's architecture is timed (``paper``: ResNet-50-FPN
 at 640x480, the paper's model); its random weights give an arbitrary number of detections (often the
@@ -14,6 +15,9 @@ post-processing and pasting the masks back at full resolution, and the copy of t
 
 Peak memory: on CPU the increase of the process' peak resident set size during the timed runs (MiB;
 the model's weights are loaded before); on the GPU ``torch.cuda.max_memory_allocated``.
+
+One row per device is also written as the result artifact ``results/segmentation_<profile>.json``
+(``segmentation_<run dir name>`` with ``--ckpt``).
 """
 
 from __future__ import annotations
@@ -83,7 +87,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: default)")
     ap.add_argument("--devices", default="cpu,cuda", help="comma-separated; cuda is skipped when absent")
     ap.add_argument("--json", help="also write the results here")
+    from sixdpose.artifacts.results import add_result_arguments, save_from_args, script_command
+
+    add_result_arguments(ap, None, Path(__file__).resolve().parents[1] / "results", "segmentation_<profile or run dir name>")
     args = ap.parse_args(argv)
+    if args.result_name is None:
+        args.result_name = "segmentation_" + (Path(args.ckpt).resolve().name if args.ckpt else args.profile)
 
     import torch
 
@@ -134,6 +143,15 @@ def main(argv: list[str] | None = None) -> int:
         del seg
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1) + "\n")
+    save_from_args(args, results, command=script_command(__file__, argv),
+                   units={"seconds": "s", "images_per_s": "images/s", "ms_per_image": "ms", "peak_gpu_mib": "MiB",
+                          "peak_rss_increase_mib": "MiB", "peak_rss_mib": "MiB"},
+                   description=f"Mask R-CNN inference ({label}) on {args.n_images} "
+                               f"{rgbs[0].shape[1]}x{rgbs[0].shape[0]} images "
+                               f"({'toy data' if args.data is None else Path(args.data).name}), disk reads excluded",
+                   config={"ckpt": args.ckpt, "profile": args.profile, "data": args.data, "split": args.split,
+                           "n_images": args.n_images, "batch_size": args.batch_size, "warmup": args.warmup,
+                           "threads": args.threads, "devices": args.devices})
     tmp.cleanup()
     return 0
 

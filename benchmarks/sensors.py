@@ -7,9 +7,11 @@ height on it, an rgb image with dark patches), and the ratio to the generator's 
 target is that a sensor model costs at most 20 % of generating a view.
 
     PYTHONPATH=src python benchmarks/sensors.py [--views 20] [--render-s 0.35] [--width 640 --height 480]
+        [--results-dir results] [--result-name sensors] [--no-result]
 
-Prints figures only, no assertions. Set OMP_NUM_THREADS=1 for a one-core figure (the models are
-single-threaded numpy/scipy; the variable only stops a threaded BLAS from taking other cores).
+Prints figures (and writes them as the result artifact ``results/sensors.json``), no assertions. Set
+OMP_NUM_THREADS=1 for a one-core figure (the models are single-threaded numpy/scipy; the variable only
+stops a threaded BLAS from taking other cores).
 """
 
 from __future__ import annotations
@@ -18,9 +20,11 @@ import argparse
 import os
 import platform
 import time
+from pathlib import Path
 
 import numpy as np
 
+from sixdpose.artifacts.results import add_result_arguments, save_from_args, script_command
 from sixdpose.generation.sensors import SENSORS, sensor_rng, simulate_depth
 
 
@@ -42,15 +46,16 @@ def synthetic_view(rng: np.random.Generator, H: int, W: int, K: np.ndarray) -> t
     return depth, rgb
 
 
-def main() -> None:
-    """Run the benchmark and print its figures."""
+def main(argv=None) -> None:
+    """Run the benchmark, print its figures and write them as a result artifact."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--views", type=int, default=20)
     ap.add_argument("--render-s", type=float, default=0.35, help="generator cost per view per core, seconds")
     ap.add_argument("--width", type=int, default=640)
     ap.add_argument("--height", type=int, default=480)
     ap.add_argument("--seed", type=int, default=0)
-    args = ap.parse_args()
+    add_result_arguments(ap, "sensors", Path(__file__).resolve().parents[1] / "results")
+    args = ap.parse_args(argv)
     H, W = args.height, args.width
     K = np.array([[615.0, 0, (W - 1) / 2], [0, 615.0, (H - 1) / 2], [0, 0, 1]])
     scene_rng = np.random.default_rng(args.seed)
@@ -62,6 +67,7 @@ def main() -> None:
           f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}, cpu_count={os.cpu_count()}")
     print(f"  per-view generation cost (--render-s): {args.render_s:.3f} s; target: sensor <= 20 % of it")
     print(f"  {'sensor':<10} {'mean ms':>8} {'best ms':>8} {'valid %':>8} {'/ render':>9}")
+    rows = []
     for sensor in SENSORS:
         times, valid = [], []
         for i, (depth, rgb) in enumerate(views):
@@ -73,6 +79,14 @@ def main() -> None:
         mean = float(np.mean(times))
         print(f"  {sensor:<10} {1e3 * mean:8.1f} {1e3 * min(times):8.1f} {100 * np.mean(valid):8.1f} "
               f"{100 * mean / args.render_s:8.1f}%")
+        rows.append({"sensor": sensor, "mean_ms": 1e3 * mean, "best_ms": 1e3 * min(times),
+                     "valid_pct": 100 * float(np.mean(valid)), "pct_of_render": 100 * mean / args.render_s})
+    save_from_args(args, rows, command=script_command(__file__, argv),
+                   units={"mean_ms": "ms per view", "best_ms": "ms per view", "valid_pct": "%",
+                          "pct_of_render": "% of --render-s"},
+                   description=f"depth-sensor models on {args.views} synthetic {W}x{H} table-top views, one process",
+                   config={"views": args.views, "render_s": args.render_s, "width": W, "height": H, "seed": args.seed,
+                           "numpy": np.__version__})
 
 
 if __name__ == "__main__":

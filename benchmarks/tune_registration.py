@@ -6,10 +6,12 @@ Usage::
 
     python benchmarks/tune_registration.py --method ransac --icp --stride 5 \\
         --variant base: --variant it20k:ransac_max_iteration=20000 [--variant NAME:k=v,k=v ...] [--csv out.csv]
+        [--results-dir results] [--result-name tune_<method>[_icp]] [--no-result]
 
 A variant is ``NAME:`` followed by comma-separated ``field=value`` overrides of the ``default`` preset
 (``--preset`` to start from another). Without ``--data`` the validation split is generated (if missing)
-with the ``val`` profile into ``data/val``. Never point this at the test split.
+with the ``val`` profile into ``data/val``. Never point this at the test split. One row per variant is
+also written as the result artifact ``results/tune_<method>[_icp].json``.
 """
 
 from __future__ import annotations
@@ -60,7 +62,12 @@ def main(argv=None) -> int:
     ap.add_argument("--min-px", type=int, default=400)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--csv", default=None)
+    from sixdpose.artifacts.results import add_result_arguments, save_from_args, script_command
+
+    add_result_arguments(ap, None, Path(__file__).resolve().parents[1] / "results", "tune_<method>[_icp]")
     args = ap.parse_args(argv)
+    if args.result_name is None:
+        args.result_name = f"tune_{args.method}" + ("_icp" if args.icp else "")
     data = args.data
     if data is None:
         from sixdpose.generation import ensure_dataset
@@ -81,6 +88,15 @@ def main(argv=None) -> int:
 
         cols = ["method", "variant", "overrides", "add_s_accuracy", "n_correct", "n_gt", "instances_per_s"]
         write_table([dict(zip(cols, o)) for o in out], cols, args.csv)
+    cols = ["method", "variant", "overrides", "add_s_accuracy", "n_correct", "n_gt", "instances_per_s"]
+    save_from_args(args, [dict(zip(cols, o)) for o in out], command=script_command(__file__, argv),
+                   units={"add_s_accuracy": "%", "n_correct": "GT instances", "n_gt": "GT instances",
+                          "instances_per_s": "instances/s"},
+                   description=f"{label} sweep on every {args.stride}-th image of {Path(str(data)).name} (GT masks, "
+                               f">= {args.min_px} px; {args.jobs} one-thread processes at a time, so instances/s "
+                               f"are slower than a quiet core)",
+                   config={"data": str(data), "split": args.split, "preset": args.preset, "stride": args.stride,
+                           "min_px": args.min_px, "jobs": args.jobs})
     return 0
 
 

@@ -53,6 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point: parse ``argv`` and run the chosen subcommand; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    # the command line as typed, for the provenance of result artifacts (sixdpose.artifacts.results)
+    args.command_line = ["sixdpose", *(sys.argv[1:] if argv is None else argv)]
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

@@ -23,6 +23,12 @@ def register(sub) -> None:
     p.add_argument("--label", default=None, help="method label for the tables (default: results file stem)")
     p.add_argument("--no-bop", action="store_true",
                    help="skip the BOP 2019 scores (AR_VSD, AR_MSSD, AR_MSPD, AR) and the ADD-S AUC")
+    g = p.add_argument_group("result artifact")
+    g.add_argument("--result-name", default=None, metavar="NAME",
+                   help="also write the summary and the per-object table, with commit, date, hardware and this "
+                        "command line, as the result artifact RESULTS_DIR/NAME.json (+ .csv); README tables are "
+                        "generated from these (python -m sixdpose.artifacts.readme)")
+    g.add_argument("--results-dir", default="results", help="directory of result artifacts (default: results)")
     p.set_defaults(func=_run)
 
 
@@ -35,6 +41,10 @@ def _run(args) -> int:
     res_path = Path(args.results)
     out = Path(args.out) if args.out else res_path.with_name(res_path.stem + "_eval")
     claim_output_dir(out, "evaluate", create=False)  # refuse a foreign directory before any work
+    if args.result_name is not None:
+        from ..artifacts.results import result_path
+
+        result_path(args.result_name, args.results_dir)  # a bad name fails before any work
     ests = read_results(res_path)
     kw = {}
     if args.symmetric_ids:
@@ -49,6 +59,8 @@ def _run(args) -> int:
                    images=ds.keys() if args.all_images else None, bop=not args.no_bop)
     claim_output_dir(out, "evaluate")
     write_tables(res, out, label=args.label or res_path.stem)
+    if args.result_name is not None:
+        _write_result(args, res, res_path)
     print(f"ADD(-S) accuracy {res.accuracy:.2f}% ({res.n_correct}/{res.n_gt} GT instances; mean over objects "
           f"{res.mean_object_accuracy:.2f}%), {res.fps:.3f} FPS, {res.instances_per_s:.3f} instances/s -> {out}")
     if res.bop:
@@ -60,3 +72,36 @@ def _run(args) -> int:
         extra = f"  AR {v['bop']['ar']:6.2f}  ADD-S AUC {v['bop']['adds_auc']:6.2f}" if "bop" in v else ""
         print(f"  {oid:>3} {v['name']:<28} {v['n_correct']:>4}/{v['n_gt']:<4} {v['accuracy']:6.2f}%{extra}")
     return 0
+
+
+def _write_result(args, res, res_path: Path) -> None:
+    """The evaluation as a result artifact: summary figures, per-object rows, the evaluation options and
+    the configuration of the command that wrote the results CSV (``<results>.config.yml``, if present)."""
+    import yaml
+
+    from ..artifacts.results import file_input, write_result
+    from .evaluate import UNITS, table_rows
+
+    producer = res_path.with_suffix(".config.yml")
+    inputs = [file_input(res_path)]
+    producer_cfg = None
+    if producer.is_file():
+        inputs.append(file_input(producer))
+        try:
+            producer_cfg = yaml.safe_load(producer.read_text())
+        except (OSError, yaml.YAMLError):
+            producer_cfg = None
+    label = args.label or res_path.stem
+    path = write_result(
+        args.result_name, dict(res.summary(), label=label), rows=table_rows(res), units=UNITS,
+        description=f"sixdpose evaluate: ADD(-S) < {args.threshold:g} x diameter of {res_path.name} on {args.data} "
+                    f"(GT instances with >= {args.min_px} visible px){'; BOP 2019 scores' if res.bop else ''}",
+        results_dir=args.results_dir, command=getattr(args, "command_line", None),
+        config={"data": str(args.data), "results": str(res_path), "split": args.split, "min_px": args.min_px,
+                "threshold": args.threshold, "symmetric_ids": args.symmetric_ids, "all_images": args.all_images,
+                "bop": not args.no_bop, "results_config": producer_cfg},
+        inputs=inputs,
+        notes="fps, instances_per_s and total_time come from the results CSV's per-image times (disk reads excluded), "
+              "measured by the command that wrote it (register / predict-pose), not by evaluate; provenance is "
+              "that of the evaluation, inputs identify the results CSV by its sha256.")
+    print(f"result -> {path}")

@@ -205,6 +205,27 @@ def _nanmean(values) -> float:
     return float(v.mean()) if len(v) else math.nan
 
 
+#: Units of the per-object table and of :meth:`EvalResult.summary` (for result artifacts).
+UNITS = {"add_s_accuracy": "%", "accuracy": "%", "mean_object_accuracy": "%", "fps": "frames/s",
+         "instances_per_s": "instances/s", "total_time": "s", "n_gt": "GT instances", "n_correct": "GT instances",
+         "ar": "%", "ar_vsd": "%", "ar_mssd": "%", "ar_mspd": "%", "adds_auc": "%"}
+
+
+def table_rows(res: EvalResult) -> list[dict]:
+    """The per-object table: one row per object (``obj_id``, ``name``, ``n_gt``, ``n_correct``,
+    ``add_s_accuracy`` in %, and the BOP scores in % when computed), then ``obj_id="all"`` (mean over
+    GT instances) and ``obj_id="objects"`` (mean over objects; counts empty)."""
+    bop_cols = ["ar", "ar_vsd", "ar_mssd", "ar_mspd", "adds_auc"] if res.bop else []
+    rows = [{"obj_id": oid, "name": v["name"], "n_gt": v["n_gt"], "n_correct": v["n_correct"], "add_s_accuracy": v["accuracy"],
+             **{c: v["bop"][c] for c in bop_cols}} for oid, v in res.per_object.items()]
+    rows.append({"obj_id": "all", "name": "mean over instances", "n_gt": res.n_gt, "n_correct": res.n_correct,
+                 "add_s_accuracy": res.accuracy, **{c: res.bop[c] for c in bop_cols}})
+    rows.append({"obj_id": "objects", "name": "mean over objects", "n_gt": "", "n_correct": "",
+                 "add_s_accuracy": res.mean_object_accuracy,
+                 **{c: _nanmean([v["bop"][c] for v in res.per_object.values()]) for c in bop_cols}})
+    return rows
+
+
 def write_tables(res: EvalResult, out_dir: str | Path, label: str = "method") -> dict[str, Path]:
     """Write ``add_s_per_object.csv`` (with the BOP scores when computed), ``add_s.tex``, ``timing.csv``
     and ``summary.json`` to ``out_dir``.
@@ -214,13 +235,7 @@ def write_tables(res: EvalResult, out_dir: str | Path, label: str = "method") ->
     """
     out = Path(out_dir)
     bop_cols = ["ar", "ar_vsd", "ar_mssd", "ar_mspd", "adds_auc"] if res.bop else []
-    rows = [{"obj_id": oid, "name": v["name"], "n_gt": v["n_gt"], "n_correct": v["n_correct"], "add_s_accuracy": v["accuracy"],
-             **{c: v["bop"][c] for c in bop_cols}} for oid, v in res.per_object.items()]
-    rows.append({"obj_id": "all", "name": "mean over instances", "n_gt": res.n_gt, "n_correct": res.n_correct,
-                 "add_s_accuracy": res.accuracy, **{c: res.bop[c] for c in bop_cols}})
-    rows.append({"obj_id": "objects", "name": "mean over objects", "n_gt": "", "n_correct": "",
-                 "add_s_accuracy": res.mean_object_accuracy,
-                 **{c: _nanmean([v["bop"][c] for v in res.per_object.values()]) for c in bop_cols}})
+    rows = table_rows(res)
     paths = {"per_object": out / "add_s_per_object.csv", "latex": out / "add_s.tex"}
     write_table(rows, ["obj_id", "name", "n_gt", "n_correct", "add_s_accuracy"] + bop_cols, paths["per_object"], paths["latex"],
                 headers=["Id", "Object", "GT instances", "Correct", "ADD(-S) (\\%)"]
