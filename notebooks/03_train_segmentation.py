@@ -7,6 +7,8 @@
 # command line are `sixdpose train-seg`, `sixdpose segment`, `sixdpose eval-seg`.
 #
 # * `PROFILE = "smoke"` (default): small images and backbone, a few minutes on a CPU (CI).
+# * `PROFILE = "cpu"`: the smoke network at 320 px for 2 epochs on `sixdpose generate --profile train`
+#   (about 30 min on a 2-core CPU); its masks feed the predicted-mask rows of notebooks 05 and 07.
 # * `PROFILE = "paper"`: section IV-A (ResNet-50-FPN, ImageNet init when cached, Adam 1e-3, /10 every 30
 #   epochs, 100 epochs, random 90/10 split) — a GPU job; multi-GPU with
 #   `torchrun --nproc_per_node N -m sixdpose.cli train-seg --profile paper ...`.
@@ -14,19 +16,20 @@
 # %% tags=["parameters"]
 # Parameters: plain values only (papermill overrides them). None means "from the environment / the profile",
 # resolved in the next cell: PROFILE from $SIXDPOSE_PROFILE (the CI / headless switch, default "smoke").
-PROFILE = None  # smoke (CI), demo (laptop CPU), paper (GPU machine, 25,000 images)
-DATA = None  # None: $SIXDPOSE_DATA, else ../data/<PROFILE>
+PROFILE = None  # smoke (CI), demo (laptop CPU), cpu (2-core CPU, the train split), paper (GPU machine, 25,000 images)
+DATA = None  # None: $SIXDPOSE_DATA, else ../data/<PROFILE> (cpu: ../data/train)
 FIGURES = "../figures"
 RUN_DIR = None  # None: ../runs/seg_<PROFILE>
-SEG_PROFILE = None  # Mask R-CNN profile; None: "paper" (ResNet-50-FPN, 100 epochs) at paper scale, else "smoke"
+SEG_PROFILE = None  # Mask R-CNN profile; None: the profile of the same name (smoke for demo)
 
 # %%
 import os
 
 PROFILE = PROFILE or os.environ.get("SIXDPOSE_PROFILE", "smoke")
-DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{PROFILE}"
+GEN_PROFILE = {"cpu": "train"}.get(PROFILE, PROFILE)  # generator profile of the data
+DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{GEN_PROFILE}"
 RUN_DIR = RUN_DIR or f"../runs/seg_{PROFILE}"
-SEG_PROFILE = SEG_PROFILE or ("paper" if PROFILE == "paper" else "smoke")
+SEG_PROFILE = SEG_PROFILE or ("smoke" if PROFILE in ("smoke", "demo") else PROFILE)
 import matplotlib.pyplot as plt
 
 from sixdpose.generation import ensure_dataset
@@ -35,7 +38,7 @@ from sixdpose.segmentation.infer import segment
 from sixdpose.segmentation.plots import ap_table_text, plot_loss, plot_predictions
 from sixdpose.segmentation.train import ensure_trained
 
-ensure_dataset(DATA, profile=PROFILE)
+ensure_dataset(DATA, profile=GEN_PROFILE)
 
 # %% [markdown]
 # ## Training (or loading an existing run)

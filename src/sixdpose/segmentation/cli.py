@@ -7,6 +7,7 @@ Multi-GPU training: ``torchrun --nproc_per_node N -m sixdpose.cli train-seg ...`
 from __future__ import annotations
 
 from ..config import add_set_option, parse_overrides
+from .config import PROFILES
 from ..logs import setup_logging
 
 
@@ -99,7 +100,9 @@ def register(subparsers) -> None:
     )
     p.add_argument("--data", required=True, help="dataset directory (synthetic layout or BOP root)")
     p.add_argument("--out", required=True, help="run directory (config, split, checkpoints, metrics)")
-    p.add_argument("--profile", choices=("smoke", "paper"), default=None, help="named config (default smoke; on --resume: the run's)")
+    p.add_argument("--profile", choices=tuple(PROFILES), default=None,
+                   help="named config: smoke (CI), cpu (2-core CPU, about 30 min on the train split), paper "
+                        "(section IV-A, GPU); default smoke; on --resume: the run's")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its last completed epoch")
     p.add_argument("--epochs", type=int, help="override the number of epochs (allowed on --resume to extend a run)")
     p.add_argument("--batch-size", dest="batch_size", type=int, help="images per step and process")

@@ -1,6 +1,6 @@
 """Typed training / inference configuration of the Mask R-CNN stage, with named profiles.
 
-Two profiles are defined:
+Three profiles are defined:
 
 ``paper``
     Section IV-A of the paper: Mask R-CNN with a ResNet-50-FPN backbone initialised from ImageNet
@@ -17,6 +17,13 @@ Two profiles are defined:
     (16-256 px), a ResNet-18-FPN with 64 channels and lighter heads, random init (no download is
     attempted), 40 epochs of at most 3 steps of 2 images (<= 120 steps, about 1-1.5 min on one core).
     On the 6-image smoke dataset it overfits its training images (mask AP50 about 0.7-0.85).
+
+``cpu``
+    The smoke network at a larger scale for a 2-core CPU: images at a shorter side of 320 px
+    (multi-scale 288-352), 300 RPN proposals and 128 sampled RoIs per training image, 2 full epochs
+    (lr /10 after the first), one data-loading worker. On the 1,200-image ``train`` split it is 1,080
+    steps of 2 images: about 25 min on two free cores, 35-60 min when another job shares them (use
+    ``--threads 1`` then: two torch threads on one free core run several times slower).
 
 A config is saved as ``config.json`` in the run directory and read back on ``--resume`` and by
 inference, so a run always records exactly what trained it.
@@ -173,6 +180,9 @@ PROFILES: dict[str, SegConfig] = {
         color_jitter=(0.1, 0.1, 0.1, 0.0),
     ),
 }
+PROFILES["cpu"] = PROFILES["smoke"].replace(
+    profile="cpu", min_size=320, max_size=427, train_min_sizes=(288, 320, 352), rpn_post_nms_train=300,
+    box_batch_size=128, epochs=2, lr_step_epochs=1, max_steps_per_epoch=0, num_workers=1, num_threads=0)
 
 
 def profile_config(name: str, **overrides) -> SegConfig:
