@@ -178,6 +178,29 @@ def test_batched_inference_equals_per_instance(pose_ds, crop):
         assert np.allclose(Rb[k], R1[0], atol=1e-5) and np.allclose(tb[k], t1[0], atol=1e-6)
 
 
+def test_depth_band_drops_background_seen_through_a_loose_mask():
+    """A predicted mask spilling onto the background: the depth band (the object's diameter) keeps the
+    object's points only, so the cloud's centroid stays on the object; 0 keeps everything."""
+    from sixdpose.pose.data import extract_instance
+
+    H, W = 60, 80
+    K = np.array([[100.0, 0, 40], [0, 100.0, 30], [0, 0, 1]])
+    depth = np.full((H, W), 1.5)
+    depth[20:40, 30:50] = 0.6 + 0.001 * np.arange(20)[None, :]  # the object, 2 cm of depth relief
+    mask = np.zeros((H, W), bool)
+    mask[18:42, 28:52] = True  # a 2-pixel spill: 176 background pixels around 400 object pixels
+    rgb = np.zeros((H, W, 3), np.uint8)
+    args = dict(crop=16, margin=0.1, num_points=32, min_points=10, rng=np.random.default_rng(0))
+    loose = extract_instance(rgb, depth, K, mask, 1, **args)
+    banded = extract_instance(rgb, depth, K, mask, 1, depth_band=0.1, **args)
+    assert loose.n_valid == 576 and banded.n_valid == 400
+    assert np.all(np.abs(banded.cloud[:, 2] - 0.61) < 0.02)
+    gt = depth[20:40, 30:50] > 0
+    exact = np.zeros((H, W), bool)
+    exact[20:40, 30:50] = gt
+    assert extract_instance(rgb, depth, K, exact, 1, depth_band=0.1, **args).n_valid == 400
+
+
 def test_configs_documented_and_validated():
     from sixdpose.config import undocumented_fields
     from sixdpose.errors import ConfigError

@@ -131,8 +131,9 @@ LEARNED_CPU = [
     ("learned, 0 refinement it.", "GT", "eval_learned_it0", "learned"),
     ("learned + 2 refinement it.", "GT", "eval_learned_it2", "learned+refine"),
     ("learned + 2 it. + ICP", "GT", "eval_learned_it2_icp", None),
-    ("learned, 0 it.", "predicted (demo segmenter)", "eval_learned_it0_predmasks", None),
-    ("learned + 2 it.", "predicted (demo segmenter)", "eval_learned_it2_predmasks", None),
+    ("learned + 2 it. + colour verification", "GT", "eval_learned_it2_colour", None),
+    ("learned, 0 it.", "predicted (Mask R-CNN `cpu`)", "eval_learned_it0_predmasks", None),
+    ("learned + 2 it.", "predicted (Mask R-CNN `cpu`)", "eval_learned_it2_predmasks", None),
 ]
 
 
@@ -151,7 +152,7 @@ def _learned_cpu_summary(src: Source) -> str:
 
 def _learned_cpu_per_object(src: Source) -> str:
     cols = [("learned (0 it.)", "eval_learned_it0"), ("+ 2 refinement it.", "eval_learned_it2"),
-            ("+ 2 it. + ICP", "eval_learned_it2_icp")]
+            ("+ 2 it. + ICP", "eval_learned_it2_icp"), ("+ 2 it. + colour verif.", "eval_learned_it2_colour")]
     res = [src(n) for _, n in cols]
     rows = []
     for r0 in res[0].rows:

@@ -15,7 +15,9 @@ from pathlib import Path
 
 #: The variants of the issue, as overrides of a base profile. ``paper``: the paper's choices (absolute
 #: translation, quaternion, no normalisation) on the base profile's crop/width; each other row changes
-#: one thing. ``full image`` is absent on purpose: on a CPU it is the cost the crop removes (its
+#: one thing. The last three change one thing on the centroid-offset base: at a CPU budget every
+#: absolute-translation variant can stay at 0 %, which would hide the effect of the other options.
+#: ``full image`` is absent on purpose: on a CPU it is the cost the crop removes (its
 #: throughput is in ``benchmarks/pose.py``), and at the paper's scale it is the ``paper`` profile itself.
 VARIANTS: dict[str, dict] = {
     "paper (absolute t, quaternion, no norm)": {"translation": "absolute", "rotation": "quaternion", "norm": "none"},
@@ -23,6 +25,9 @@ VARIANTS: dict[str, dict] = {
     "+ 6D rotation": {"translation": "absolute", "rotation": "6d", "norm": "none"},
     "+ group norm": {"translation": "absolute", "rotation": "quaternion", "norm": "group"},
     "+ batch norm": {"translation": "absolute", "rotation": "quaternion", "norm": "batch"},
+    "centroid offset + 6D rotation": {"translation": "centroid_offset", "rotation": "6d", "norm": "none"},
+    "centroid offset + group norm": {"translation": "centroid_offset", "rotation": "quaternion", "norm": "group"},
+    "centroid offset + batch norm": {"translation": "centroid_offset", "rotation": "quaternion", "norm": "batch"},
 }
 
 COLUMNS = ("variant", "translation", "rotation", "norm", "epochs", "steps", "train_seconds", "val_add", "n_val")

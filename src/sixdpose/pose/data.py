@@ -84,7 +84,8 @@ def crop_image(rgb: np.ndarray, y0: float, x0: float, side: float, size: int) ->
 
 def extract_instance(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, mask: np.ndarray, obj_id: int, *,
                      crop: int, margin: float, num_points: int, min_points: int, rng: np.random.Generator,
-                     index: int = 0, score: float = 1.0, keep_points: bool = False) -> InstanceInput | str:
+                     index: int = 0, score: float = 1.0, keep_points: bool = False,
+                     depth_band: float = 0.0) -> InstanceInput | str:
     """Build the input of one instance, or return the reason it is unusable.
 
     Args:
@@ -93,11 +94,21 @@ def extract_instance(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, mask: np
         num_points: points sampled (without replacement when enough, else wrapped repeats).
         min_points: fewer valid depth pixels under the mask -> the reason string.
         rng: numpy generator. keep_points: keep every masked point and colour (ICP / colour check).
+        depth_band: metres; > 0 drops the masked points whose depth is farther than this from the
+            median depth under the mask (inference passes the object's diameter: no point of the object
+            can lie farther, so with a ground-truth mask nothing is dropped, while the background seen
+            through a predicted mask's loose edges is, which would otherwise drag the cloud's centroid
+            and so the translation tens of centimetres back; it assumes most masked pixels lie on the
+            object, as the median is taken over all of them). 0 keeps every point.
     Returns:
         :class:`InstanceInput` or a reason string such as ``"3 valid depth pixels under the mask (< 10)"``.
     """
     mask = np.asarray(mask, dtype=bool)
     pts, col, pix = backproject(depth, K, mask, rgb if keep_points else None)
+    if depth_band > 0 and len(pts):
+        keep = np.abs(pts[:, 2] - np.median(pts[:, 2])) <= depth_band
+        pts, pix = pts[keep], pix[keep]
+        col = col[keep] if col is not None else None
     n = len(pts)
     if n < min_points:
         return f"{n} valid depth pixel(s) under the mask (< {min_points})"

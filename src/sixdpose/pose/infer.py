@@ -20,6 +20,7 @@ import numpy as np
 import torch
 
 from ..artifacts.poses import PoseEstimate
+from ..datasets.base import DatasetError
 from . import checkpoint as ck
 from .config import PoseConfig, RefinerConfig
 from .data import Frame, PoseError, collate_frames, extract_instance
@@ -113,6 +114,7 @@ class Estimator:
         if self.iterations and self.refiner is None:
             raise PoseError(f"--iterations {self.iterations} needs a refiner run (--refiner)")
         self.icp, self.colour_verify, self.reader = icp, colour_verify, reader
+        self._diameters: dict[int, float] = {}
         self.score_thresh, self.seed, self.max_batch = score_thresh, seed, max_batch
         self._cache = None
         if icp or colour_verify:
@@ -169,7 +171,7 @@ class Estimator:
                 continue
             inst = extract_instance(sample.rgb, sample.depth, sample.K, mask, oid, crop=self.cfg.crop, margin=self.cfg.crop_margin,
                                     num_points=self.cfg.num_points, min_points=self.cfg.min_points, rng=rng, index=k,
-                                    score=score, keep_points=keep_points)
+                                    score=score, keep_points=keep_points, depth_band=self._diameter(oid))
             if isinstance(inst, str):
                 rows[k] = PoseEstimate.failed(sample.scene_id, sample.im_id, oid, inst)
             else:
@@ -189,6 +191,18 @@ class Estimator:
             if r.reason:
                 log.info("scene %d image %d obj %d: %s", r.scene_id, r.im_id, r.obj_id, r.reason)
         return rows
+
+    def _diameter(self, obj_id: int) -> float:
+        """The object's diameter in metres from the reader's model (0.0 without a reader): the depth band
+        of :func:`~sixdpose.pose.data.extract_instance` that drops background seen through a mask."""
+        if self.reader is None:
+            return 0.0
+        if obj_id not in self._diameters:
+            try:
+                self._diameters[obj_id] = float(self.reader.model(obj_id).diameter)
+            except (DatasetError, KeyError):  # an object without a model: no filter for it
+                self._diameters[obj_id] = 0.0
+        return self._diameters[obj_id]
 
     def _post(self, inst, R, t):
         """Optional ICP and colour verification of one pose (hybrid stage code, ``default`` preset)."""
