@@ -99,15 +99,41 @@ class Estimator:
 
     def __init__(self, pose, refiner=None, *, iterations: int | None = None, device: str | None = None, icp: bool = False,
                  colour_verify: bool = False, reader=None, score_thresh: float = 0.5, seed: int = 0, max_batch: int = 64):
-        self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
-        self.pose_ckpt = ck.load(pose, kind="pose")
-        self.net, self.cfg = load_posenet(self.pose_ckpt, self.device)
-        self.classes = ck.classes_of(self.pose_ckpt)
-        self.class_index = {oid: k for k, (oid, _, _) in enumerate(self.classes)}
-        self.refiner, self.refiner_cfg = None, None
+        dev = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
+        pose_ckpt = ck.load(pose, kind="pose")
+        net, cfg = load_posenet(pose_ckpt, dev)
+        refiner_ckpt, ref_net, ref_cfg = None, None, None
         if refiner is not None:
-            self.refiner_ckpt = ck.load(refiner, kind="refiner")
-            self.refiner, self.refiner_cfg = load_refiner(self.refiner_ckpt, self.pose_ckpt, self.device)
+            refiner_ckpt = ck.load(refiner, kind="refiner")
+            ref_net, ref_cfg = load_refiner(refiner_ckpt, pose_ckpt, dev)
+        self._setup(net, cfg, ck.classes_of(pose_ckpt), ref_net, ref_cfg, dev, iterations, icp, colour_verify, reader,
+                    score_thresh, seed, max_batch)
+        self.pose_ckpt, self.refiner_ckpt = pose_ckpt, refiner_ckpt
+
+    @classmethod
+    def from_networks(cls, posenet, cfg: PoseConfig, classes, refiner=None, refiner_cfg: RefinerConfig | None = None, *,
+                      iterations: int | None = None, device="cpu", reader=None, score_thresh: float = 0.5, seed: int = 0,
+                      max_batch: int = 64) -> "Estimator":
+        """An estimator over networks already in memory (validation during training), without checkpoints.
+
+        Args:
+            posenet: PoseNet. cfg: its PoseConfig. classes: ``[(obj_id, name, symmetric), ...]`` in class
+                order. refiner, refiner_cfg: Refiner and its RefinerConfig, or None. The other arguments
+                as in :class:`Estimator` (no ICP or colour verification).
+        """
+        est = cls.__new__(cls)
+        est._setup(posenet, cfg, classes, refiner, refiner_cfg, torch.device(device), iterations, False, False, reader,
+                   score_thresh, seed, max_batch)
+        est.pose_ckpt, est.refiner_ckpt = None, None
+        return est
+
+    def _setup(self, net, cfg, classes, refiner, refiner_cfg, device, iterations, icp, colour_verify, reader,
+               score_thresh, seed, max_batch) -> None:
+        """Every attribute of an estimator but the checkpoints (shared by both constructors)."""
+        self.device, self.net, self.cfg = device, net, cfg
+        self.classes = [tuple(c) for c in classes]
+        self.class_index = {int(c[0]): k for k, c in enumerate(self.classes)}
+        self.refiner, self.refiner_cfg = refiner, (refiner_cfg if refiner is not None else None)
         self.iterations = (self.refiner_cfg.iterations if self.refiner_cfg else 0) if iterations is None else int(iterations)
         if self.iterations < 0:
             raise PoseError(f"iterations must be >= 0, got {self.iterations}")
@@ -129,8 +155,8 @@ class Estimator:
     def settings(self) -> dict:
         """What produced the estimates (for the ``.config.yml`` beside a results CSV)."""
         return {
-            "pose_run": self.pose_ckpt["path"], "pose_config": self.cfg.to_dict(),
-            "refiner_run": self.refiner_ckpt["path"] if self.refiner is not None else None,
+            "pose_run": self.pose_ckpt["path"] if self.pose_ckpt else None, "pose_config": self.cfg.to_dict(),
+            "refiner_run": self.refiner_ckpt["path"] if self.refiner_ckpt else None,
             "refiner_config": self.refiner_cfg.to_dict() if self.refiner_cfg else None,
             "iterations": self.iterations, "icp": self.icp, "colour_verify": self.colour_verify,
             "score_thresh": self.score_thresh, "seed": self.seed, "device": str(self.device),

@@ -97,12 +97,8 @@ def validate_accuracy(reader, posenet, cfg, classes, device, refiner=None, itera
     from ..evaluation.evaluate import evaluate
     from .infer import Estimator
 
-    est = Estimator.__new__(Estimator)  # reuse the in-memory networks without a checkpoint
-    est.device, est.net, est.cfg, est.refiner = device, posenet, cfg, refiner
-    est.classes = classes
-    est.class_index = {int(c[0]): k for k, c in enumerate(classes)}
-    est.iterations, est.icp, est.colour_verify, est.reader = (iterations if refiner is not None else 0), False, False, reader
-    est.score_thresh, est.seed, est.max_batch, est._cache = 0.0, 0, 64, None
+    est = Estimator.from_networks(posenet, cfg, classes, refiner, iterations=iterations if refiner is not None else 0,
+                                  device=device, reader=reader, score_thresh=0.0)
     was = [posenet.training] + ([refiner.training] if refiner is not None else [])
     posenet.eval()
     if refiner is not None:
