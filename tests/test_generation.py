@@ -298,3 +298,43 @@ def test_sensor_setting_applies_the_model_to_depth_only(tmp_path, ycb_dir, smoke
         assert (sb.depth[valid] != sa.depth[valid]).mean() > 0.5  # noisy
         assert 0.001 < ((sb.depth == 0) & valid).mean() < 0.3  # some holes, not a blank map
     assert "sensor: kinect" in (b / "config.yml").read_text()
+
+
+def test_diverging_simulation_is_redrawn(tmp_path, ycb_dir, smoke_config, monkeypatch):
+    """A draw whose contact solve diverges (Drake: "non-finite value ... on a pose input port") is
+    re-drawn like one that does not come to rest, instead of failing the scene (seen on the ycbv
+    profile's scene 50). The fault is injected into the first draw's simulator; the scene function runs
+    in this process (the pool's workers are spawned)."""
+    from sixdpose.generation import generate
+    from sixdpose.generation import runner
+    from sixdpose.generation import sim as simmod
+    from sixdpose.generation.objects import resolve_objects
+
+    class Diverging:
+        def __init__(self, inner):
+            self.inner = inner
+
+        def Initialize(self):
+            return self.inner.Initialize()
+
+        def AdvanceTo(self, t):
+            raise RuntimeError("SceneGraph encountered a non-finite value (e.g., NaN or infinity) on a pose input port.")
+
+    draws = []
+    real_init = simmod.SceneSimulator.__init__
+
+    def init(self, *a, **kw):
+        real_init(self, *a, **kw)
+        draws.append(self)
+        if len(draws) == 1:
+            self.simulator = Diverging(self.simulator)
+
+    cfg = smoke_config.replace(scenes=1, views=1)
+    out = tmp_path / "ds"
+    generate(out, cfg.replace(scenes=0), workers=1, assets=ycb_dir, progress=False)  # models, config, no scene
+    monkeypatch.setattr(simmod.SceneSimulator, "__init__", init)
+    r = runner.render_scene(out, cfg, resolve_objects(cfg, ycb_dir), 0)
+    assert r["ok"], r.get("error")
+    assert len(draws) >= 2 and draws[0]._result.diverged and not draws[0]._result.at_rest
+    record = json.loads((out / ".scenes" / "000000.json").read_text())
+    assert record["attempt"] >= 1

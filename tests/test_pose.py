@@ -390,3 +390,23 @@ def test_ablation_trains_each_variant_and_scores_on_val(pose_ds, tmp_path):
     t2 = run_ablation(pose_ds, pose_ds, tmp_path / "abl", profile="smoke", variants=variants, epochs=2, min_px=0)
     assert (tmp_path / "abl" / "0_paper" / "model.pt").stat().st_mtime_ns == mtime
     assert list(t2["val_add"]) == list(t["val_add"])
+
+
+def test_colour_jitter_augmentation():
+    """colour_jitter: each image of a batch gets its own gain/gamma transform, reproducible from the rng,
+    within [0, 1] before normalisation; 0 leaves the colours as they are."""
+    from sixdpose.pose.data import MEAN, STD, normalise_images
+
+    imgs = np.random.default_rng(0).integers(0, 256, size=(4, 8, 8, 3), dtype=np.uint8)
+    plain = normalise_images(imgs)
+    assert torch.equal(normalise_images(imgs, 0.0, np.random.default_rng(1), jitter=0.0), plain)
+    a = normalise_images(imgs, 0.0, np.random.default_rng(1), jitter=0.3)
+    b = normalise_images(imgs, 0.0, np.random.default_rng(1), jitter=0.3)
+    assert torch.equal(a, b) and not torch.equal(a, plain)
+    raw = a.numpy().transpose(0, 2, 3, 1) * STD + MEAN  # back to [0, 1] colours
+    assert raw.min() >= -1e-5 and raw.max() <= 1 + 1e-5
+    x = imgs.astype(np.float32) / 255.0
+    ratios = [np.median(raw[k] / np.maximum(x[k], 1e-3)) for k in range(4)]
+    assert np.ptp(ratios) > 0.01  # a different transform per image
+    with pytest.raises(Exception, match="colour_jitter"):
+        PoseConfig(colour_jitter=1.5)

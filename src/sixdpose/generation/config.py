@@ -94,7 +94,8 @@ class GenerationConfig(Config):
         contact_points_per_edge: contact spheres per box edge (see :mod:`sixdpose.generation.sim`).
         table_edge_spacing: spacing of the contact spheres along the table top's edges, metres.
         scene_radius: objects farther than this (metres) from the table centre have left the scene.
-        max_attempts: re-draws of a scene that does not come to rest.
+        max_attempts: draws of a scene before it fails: a draw that does not come to rest within
+            ``sim_time`` or whose simulation diverges (non-finite poses) is replaced by the next draw.
         model_points: points of each reference model cloud.
         sensor: depth sensor model applied to every rendered view before it is written
             (:mod:`sixdpose.generation.sensors`: ``ideal`` (the paper's perfect depth), ``kinect``,

@@ -89,7 +89,7 @@ def render_scene(root: Path, cfg: GenerationConfig, objects: "ObjectSet | Path",
             if res.at_rest:
                 break
         else:
-            raise RuntimeError(f"not at rest after {cfg.sim_time} s in {cfg.max_attempts} attempts")
+            raise RuntimeError(f"not at rest after {cfg.sim_time} s (or the simulation diverged) in {cfg.max_attempts} attempts")
         views, images = {}, []
         for v, X_WC in enumerate(cams):
             im_id = scene * cfg.views + v

@@ -70,6 +70,8 @@ class SettleResult:
         sim_time: simulated seconds.
         left: indices of objects that left the scene (parked out of sight, not annotated).
         off_table: indices of objects that ended below the table top (on the ground).
+        diverged: the simulation produced non-finite poses at ``sim_time`` (Drake refuses to go on);
+            the scene is then re-drawn like one that does not come to rest (``X_WO`` is empty).
     """
 
     X_WO: list
@@ -77,6 +79,7 @@ class SettleResult:
     sim_time: float
     left: list
     off_table: list
+    diverged: bool = False
 
 
 def _static_scene(cfg: GenerationConfig):
@@ -173,7 +176,13 @@ class SceneSimulator:
         at_rest = False
         while t < cfg.sim_time - 1e-9:
             t = builtins.min(t + 0.1, cfg.sim_time)
-            self.simulator.AdvanceTo(t)
+            try:
+                self.simulator.AdvanceTo(t)
+            except RuntimeError as e:  # the contact solve diverged (NaN poses): this draw is unusable
+                if "non-finite" not in str(e):
+                    raise
+                self._result = SettleResult([], False, t, [], [], diverged=True)
+                return self._result
             v = plant.GetVelocities(pc)
             still = still + 1 if (v.size == 0 or float(np.abs(v).max()) < cfg.rest_speed) else 0
             if still >= 2:

@@ -81,6 +81,10 @@ class PoseConfig(Config):
         min_points: instances with fewer valid depth pixels are skipped in training and get a
             score-0 row at inference.
         rgb_noise: uniform per-pixel noise amplitude added to [0, 1] colours in training (0: none).
+        colour_jitter: per-image colour transform in training (0: none; 0.3: brightness x U(0.7, 1.3),
+            per-channel gains x U(0.85, 1.15), gamma exp(U(-0.3, 0.3))): another camera's white balance,
+            exposure and response, for networks meant to run on real frames
+            (:func:`~sixdpose.pose.data.normalise_images`).
         max_images: train on the first N images only (0: all; the smoke profile uses a handful).
         repeat: each image is visited ``repeat`` times per epoch.
         num_workers: data-loading worker processes.
@@ -110,6 +114,7 @@ class PoseConfig(Config):
     num_model_points: int = 500
     min_points: int = 10
     rgb_noise: float = 0.3
+    colour_jitter: float = 0.0
     max_images: int = 0
     repeat: int = 1
     num_workers: int = 2
@@ -142,6 +147,8 @@ class PoseConfig(Config):
             raise ValueError(f"norm must be one of {NORMS}, got {self.norm!r}")
         if self.emb_dim < 1 or self.min_points < 1 or self.warmup_steps < 0 or self.rgb_noise < 0:
             raise ValueError("emb_dim, min_points must be >= 1; warmup_steps, rgb_noise >= 0")
+        if not 0 <= self.colour_jitter < 1:
+            raise ValueError(f"colour_jitter must be in [0, 1), got {self.colour_jitter}")
 
     def arch(self) -> dict:
         """The fields that define the network's shapes (checked when loading weights)."""

@@ -126,12 +126,23 @@ def extract_instance(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, mask: np
                          pts if keep_points else None, col if keep_points else None, n_valid=n)
 
 
-def normalise_images(images: np.ndarray, noise: float = 0.0, rng: np.random.Generator | None = None) -> torch.Tensor:
-    """(B, H, W, 3) uint8 -> (B, 3, H, W) float32 normalised (ImageNet mean/std), optional uniform noise.
+def normalise_images(images: np.ndarray, noise: float = 0.0, rng: np.random.Generator | None = None,
+                     jitter: float = 0.0) -> torch.Tensor:
+    """(B, H, W, 3) uint8 -> (B, 3, H, W) float32 normalised (ImageNet mean/std), optional augmentation.
 
-    ``noise`` > 0 adds U(-noise, noise) per pixel and channel to the [0, 1] colours (clipped) first.
+    ``jitter`` > 0 (training only): every image gets its own colour transform of the [0, 1] colours,
+    ``x -> clip(g_c * x ** gamma)`` with per-channel gains ``g_c = s * U(1 - jitter/2, 1 + jitter/2)``,
+    a brightness ``s ~ U(1 - jitter, 1 + jitter)`` and ``gamma = exp(U(-jitter, jitter))``: another
+    camera's white balance, exposure and response curve (domain randomisation for real frames).
+    ``noise`` > 0 then adds U(-noise, noise) per pixel and channel (clipped).
     """
     x = images.astype(np.float32) / 255.0
+    if jitter > 0:
+        B = len(x)
+        gamma = np.exp(rng.uniform(-jitter, jitter, size=(B, 1, 1, 1))).astype(np.float32)
+        gain = (rng.uniform(1 - jitter, 1 + jitter, size=(B, 1, 1, 1))
+                * rng.uniform(1 - jitter / 2, 1 + jitter / 2, size=(B, 1, 1, 3))).astype(np.float32)
+        x = np.clip(gain * x ** gamma, 0.0, 1.0)
     if noise > 0:
         x = np.clip(x + rng.uniform(-noise, noise, size=x.shape).astype(np.float32), 0.0, 1.0)
     x = (x - MEAN) / STD
@@ -139,11 +150,11 @@ def normalise_images(images: np.ndarray, noise: float = 0.0, rng: np.random.Gene
 
 
 def collate_frames(frames: list[Frame], class_index: dict[int, int], noise: float = 0.0,
-                   rng: np.random.Generator | None = None) -> dict:
+                   rng: np.random.Generator | None = None, jitter: float = 0.0) -> dict:
     """Batch the instances of several frames for one forward pass.
 
     Crop mode: one image per instance. Full-image mode: one image per frame (its instances share the
-    CNN pass). Returns a dict of CPU tensors: ``images`` (B, 3, H, W), ``img_index`` (N,),
+    CNN pass). ``noise``, ``jitter``: training augmentation (:func:`normalise_images`). Returns a dict of CPU tensors: ``images`` (B, 3, H, W), ``img_index`` (N,),
     ``choose`` (N, P), ``cloud`` (N, P, 3), ``obj_index`` (N,), and ``R`` (N, 3, 3) / ``t`` (N, 3)
     float32 when every instance has ground truth; ``instances``: the :class:`InstanceInput` list.
     """
@@ -158,7 +169,7 @@ def collate_frames(frames: list[Frame], class_index: dict[int, int], noise: floa
         imgs = np.stack([f.image[..., :3] for f in keep])
         img_index = np.concatenate([np.full(len(f.instances), k) for k, f in enumerate(keep)])
     out = {
-        "images": normalise_images(imgs, noise, rng),
+        "images": normalise_images(imgs, noise, rng, jitter),
         "img_index": torch.from_numpy(img_index.astype(np.int64)),
         "choose": torch.from_numpy(np.stack([i.choose for i in insts])),
         "cloud": torch.from_numpy(np.stack([i.cloud for i in insts])),

@@ -277,7 +277,8 @@ def _train(kind, data, run_dir, profile, resume, masks, val, dev, progress, over
         rows, losses = [], []
         for step, frames in enumerate(loader):
             rng = np.random.default_rng([cfg.seed, epoch, step, rank, 11])
-            batch = collate_frames(frames, class_index, cfg.rgb_noise if is_pose else 0.0, rng)
+            batch = collate_frames(frames, class_index, cfg.rgb_noise if is_pose else 0.0, rng,
+                                   cfg.colour_jitter if is_pose else 0.0)
             insts = batch["instances"]
             if not insts:
                 if distributed:
