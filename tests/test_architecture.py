@@ -235,7 +235,7 @@ def test_claim_output_dir_rules(tmp_path):
 
 
 @pytest.mark.parametrize("command", ["generate", "export-bop", "train-seg", "segment", "register", "evaluate", "fetch-ycb",
-                                     "train-pose", "train-refiner", "predict-pose"])
+                                     "train-pose", "train-refiner", "predict-pose", "pose-ablation"])
 def test_every_writing_command_refuses_a_foreign_directory(tmp_path, command, capsys):
     from sixdpose.cli import main
     from sixdpose.segmentation.toydata import make_toy_dataset
@@ -255,6 +255,7 @@ def test_every_writing_command_refuses_a_foreign_directory(tmp_path, command, ca
         "fetch-ycb": ["fetch-ycb", "--to", str(d), "--objects", "055_baseball", "--base-url", "http://127.0.0.1:9"],
         "train-pose": ["train-pose", "--data", str(syn), "--out", str(d), "--no-progress"],
         "train-refiner": ["train-refiner", "--pose", str(tmp_path / "no-run"), "--data", str(syn), "--out", str(d), "--no-progress"],
+        "pose-ablation": ["pose-ablation", "--train", str(syn), "--val", str(syn), "--out", str(d), "--epochs", "1", "--no-progress"],
         "predict-pose": ["predict-pose", "--data", str(syn), "--pose", str(tmp_path / "no-run"),
                          "--out", str(d / "models" / "obj_000001.ply"), "--no-progress"],
     }[command]

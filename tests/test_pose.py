@@ -392,6 +392,30 @@ def test_ablation_trains_each_variant_and_scores_on_val(pose_ds, tmp_path):
     assert list(t2["val_add"]) == list(t["val_add"])
 
 
+def test_pose_ablation_cli(pose_ds, tmp_path, capsys):
+    """``sixdpose pose-ablation``: the chosen variants with equal epochs, a table beside the runs and a
+    result artifact; a budget is required and bad variant indices are one line."""
+    import json
+
+    out, res = tmp_path / "abl", tmp_path / "res"
+    base = ["pose-ablation", "--train", str(pose_ds), "--val", str(pose_ds), "--out", str(out), "--profile", "smoke",
+            "--epochs", "1", "--min-px", "0", "--no-progress"]
+    argv = base + ["--variants", "0,5", "--results-dir", str(res)]
+    assert main(argv) == 0
+    data = json.loads((res / "pose_ablation_smoke.json").read_text())
+    rows = data["rows"]
+    assert [r["variant"] for r in rows] == ["paper (absolute t, quaternion, no norm)", "centroid offset + 6D rotation"]
+    assert all(r["epochs"] == 1 and r["steps"] > 0 for r in rows)
+    assert (out / "ablation.csv").is_file() and (out / "ablation.tex").is_file()
+    capsys.readouterr()
+    for bad in (["--variants", "9"], ["--variants", "x"]):
+        assert main(base + bad + ["--no-result"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--variants" in err[0]
+    no_budget = [a for a in argv if a not in ("--epochs", "1")]
+    assert main(no_budget) == 2 and "--epochs" in capsys.readouterr().err
+
+
 def test_colour_jitter_augmentation():
     """colour_jitter: each image of a batch gets its own gain/gamma transform, reproducible from the rng,
     within [0, 1] before normalisation; 0 leaves the colours as they are."""

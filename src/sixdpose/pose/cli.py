@@ -1,4 +1,4 @@
-"""Subcommands of the learned pose stage: ``train-pose``, ``train-refiner``, ``predict-pose``.
+"""Subcommands of the learned pose stage: ``train-pose``, ``train-refiner``, ``predict-pose``, ``pose-ablation``.
 
 Multi-process training: ``torchrun --nproc_per_node N -m sixdpose.cli train-pose ...`` (gloo on CPU,
 NCCL on GPUs; only rank 0 writes files).
@@ -79,6 +79,43 @@ def _cmd_predict(args) -> int:
     return 0
 
 
+def _cmd_ablation(args) -> int:
+    from ..artifacts.results import write_result
+    from ..artifacts.tables import write_table
+    from ..errors import ConfigError
+    from ..fileio import claim_output_dir
+    from .ablation import VARIANTS, run_ablation
+
+    setup_logging(args.verbose)
+    names = list(VARIANTS)
+    if args.variants:
+        try:
+            picked = [names[int(k)] for k in args.variants.split(",")]
+        except (ValueError, IndexError):
+            raise ConfigError(f"--variants: comma-separated indices 0-{len(names) - 1}, got {args.variants!r}") from None
+    else:
+        picked = names
+    if (args.epochs is None) == (args.time_budget is None):
+        raise ConfigError("give the budget of every variant: --epochs N (equal steps) or --time-budget SECONDS (equal time)")
+    claim_output_dir(args.out, "pose-ablation")  # refuse a foreign directory before any work
+    budget = {"epochs": args.epochs, "time_budget": 0.0} if args.epochs is not None else {"time_budget": args.time_budget}
+    table = run_ablation(args.train, args.val, args.out, profile=args.profile, variants={n: VARIANTS[n] for n in picked},
+                         min_px=args.min_px, val_images=args.val_images, progress=not args.no_progress,
+                         **budget, **parse_overrides(args.overrides))
+    out = Path(args.out)
+    write_table(table, list(table.columns), out / "ablation.csv", out / "ablation.tex")
+    print(table.to_string(index=False))
+    if not args.no_result:
+        path = write_result(args.result_name or f"pose_ablation_{args.profile}", table,
+                            units={"train_seconds": "s", "val_add": "%", "n_val": "GT instances"},
+                            description=f"pose ablation: each variant trained on {args.train} ({budget}), ADD(-S) on "
+                                        f"{args.val} (GT masks, >= {args.min_px} visible px)",
+                            config={"profile": args.profile, **budget, **parse_overrides(args.overrides)},
+                            results_dir=args.results_dir)
+        print(f"result -> {path}")
+    return 0
+
+
 def _train_args(p, refiner: bool) -> None:
     p.add_argument("--data", required=True, help="training dataset (synthetic layout or BOP root), e.g. data/train")
     p.add_argument("--out", required=True, help="run directory (config.json, metrics.csv, last.pt, model.pt)")
@@ -97,7 +134,7 @@ def _train_args(p, refiner: bool) -> None:
 
 
 def register(subparsers) -> None:
-    """Add ``train-pose``, ``train-refiner`` and ``predict-pose`` to the ``sixdpose`` parser."""
+    """Add ``train-pose``, ``train-refiner``, ``predict-pose`` and ``pose-ablation`` to the ``sixdpose`` parser."""
     p = subparsers.add_parser("train-pose", help="train the learned pose network (paper IV-C)",
                               description="Train the DenseFusion-like pose network (PSPNet/ResNet-18 colour embedding, "
                               "point fusion, attention pooling). Profiles: smoke (CI), cpu (2 h on 2 cores with the "
@@ -132,3 +169,28 @@ def register(subparsers) -> None:
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("-v", "--verbose", action="store_true", help="log every score-0 row's reason")
     p.set_defaults(func=_cmd_predict)
+
+    from .ablation import VARIANTS
+
+    p = subparsers.add_parser("pose-ablation", help="train each option of the paper's architecture alone and score it on val",
+                              description="The ablation of section IV-C's choices: each variant (indices: " + "; ".join(
+                                  f"{k} {n}" for k, n in enumerate(VARIANTS)) + ") trained on --train with the same "
+                              "budget and scored by ADD(-S) on --val (never test). Resumable: finished variants are "
+                              "scored, not retrained. Writes OUT/<k>_<variant>/ runs, OUT/ablation.csv/.tex and the "
+                              "result artifact RESULTS_DIR/NAME.json.")
+    p.add_argument("--train", required=True, help="training dataset, e.g. data/train")
+    p.add_argument("--val", required=True, help="held-out dataset the variants are scored on, e.g. data/val (never test)")
+    p.add_argument("--out", required=True, help="directory of the variants' runs")
+    p.add_argument("--profile", choices=("smoke", "cpu", "paper"), default="cpu", help="base PoseConfig profile")
+    p.add_argument("--epochs", type=int, default=None, help="epochs per variant (equal steps; time budget off)")
+    p.add_argument("--time-budget", dest="time_budget", type=float, default=None, help="seconds of training per variant (equal time)")
+    p.add_argument("--variants", default=None, help="comma-separated variant indices (default: all)")
+    p.add_argument("--val-images", dest="val_images", type=int, default=0, help="score on the first N images of --val (0: all)")
+    p.add_argument("--min-px", dest="min_px", type=int, default=400, help="visible pixels of a scored instance")
+    p.add_argument("--results-dir", default="results", help="directory of the result artifact (default: results)")
+    p.add_argument("--result-name", default=None, help="result name (default: pose_ablation_<profile>)")
+    p.add_argument("--no-result", action="store_true", help="write no result artifact")
+    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("-v", "--verbose", action="store_true")
+    add_set_option(p)
+    p.set_defaults(func=_cmd_ablation)
