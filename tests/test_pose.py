@@ -434,3 +434,20 @@ def test_colour_jitter_augmentation():
     assert np.ptp(ratios) > 0.01  # a different transform per image
     with pytest.raises(Exception, match="colour_jitter"):
         PoseConfig(colour_jitter=1.5)
+
+
+def test_learned_method_in_compare_methods(smoke_run, pose_ds):
+    """``compare.learned_method``: a trained run as a method of ``compare_methods``, on chosen images only."""
+    from sixdpose.datasets import open_dataset
+    from sixdpose.evaluation.compare import compare_methods, learned_method
+
+    keys = open_dataset(pose_ds).keys()
+    table, runs = compare_methods(pose_ds, {"learned": learned_method(smoke_run)}, {"gt": ("gt", [1, 2])}, min_px=0)
+    run = runs[("gt", "learned")]
+    assert sorted({(e.scene_id, e.im_id) for e in run.estimates}) == sorted(keys[1:3])
+    assert table.loc[0, "n_gt"] == 2 and 0 <= table.loc[0, "add_s"] <= 100
+    from sixdpose.evaluation.compare import per_object_table
+
+    po = per_object_table(runs)
+    assert list(po.columns) == ["obj_id", "name", "n_gt", "learned"] and po.loc[0, "n_gt"] == 2
+    assert po.loc[0, "learned"] == table.loc[0, "add_s"]  # one object: its accuracy is the overall one

@@ -2,7 +2,8 @@
 Tables II and III; notebooks call this, they hold no loop of their own).
 
 A *method* is a name and a function ``run(reader, masks, indices) -> list[PoseEstimate]``;
-:func:`hybrid_methods` builds the six hybrid ones (RANSAC / FGR / Super4PCS, each with and without ICP).
+:func:`hybrid_methods` builds the six hybrid ones (RANSAC / FGR / Super4PCS, each with and without ICP),
+:func:`learned_method` one of a trained learned-pose run.
 """
 
 from __future__ import annotations
@@ -48,6 +49,23 @@ def hybrid_methods(cfg=None, workers: int = 2, methods=("ransac", "fgr", "super4
     return out
 
 
+def learned_method(pose, refiner=None, iterations: int = 0, icp: bool = False, colour_verify: bool = False,
+                   score_thresh: float = 0.5) -> Callable:
+    """A trained learned-pose run as a method ``run(reader, masks, indices)`` for :func:`compare_methods`.
+
+    Args:
+        pose: run directory of ``train-pose``. refiner: run directory of ``train-refiner`` or None.
+        iterations, icp, colour_verify, score_thresh: as :class:`sixdpose.pose.Estimator`.
+    """
+    from ..pose.infer import predict_dataset
+
+    def run(reader, masks, indices):
+        return predict_dataset(reader, pose, refiner=refiner, masks=masks, iterations=iterations, icp=icp,
+                               colour_verify=colour_verify, score_thresh=score_thresh, indices=indices)[0]
+
+    return run
+
+
 def compare_methods(data: DatasetReader | str, methods: dict[str, Callable], mask_sources: dict[str, tuple[str, list[int]]],
                     min_px: int = 400, threshold: float = 0.1, bop: bool = False, also=()):
     """Run every method on every mask source and evaluate each run on the same images.
@@ -86,3 +104,24 @@ def compare_methods(data: DatasetReader | str, methods: dict[str, Callable], mas
                 row[col] = evaluate(other, est, min_px=min_px, threshold=threshold, images=images).accuracy
             rows.append(row)
     return pd.DataFrame(rows), runs
+
+
+def per_object_table(runs: dict, masks: str = "gt"):
+    """ADD(-S) per object of every method of one mask source, side by side.
+
+    Args:
+        runs: the ``{(masks, method): Run}`` of :func:`compare_methods`. masks: the mask source label.
+    Returns:
+        ``pandas.DataFrame`` with columns ``obj_id, name, n_gt`` and one ADD(-S) % column per method (in
+        the order of ``runs``), one row per object with GT instances, sorted by obj_id.
+    """
+    import pandas as pd
+
+    table: dict[int, dict] = {}
+    for (label, method), run in runs.items():
+        if label != masks:
+            continue
+        for oid, v in run.result.per_object.items():
+            row = table.setdefault(int(oid), {"obj_id": int(oid), "name": v["name"], "n_gt": v["n_gt"]})
+            row[method] = v["accuracy"]
+    return pd.DataFrame([table[k] for k in sorted(table)])

@@ -257,13 +257,15 @@ class Estimator:
 
 def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: int | None = None, icp: bool = False,
                     colour_verify: bool = False, device: str | None = None, split: str = "test", limit: int = 0,
-                    score_thresh: float = 0.5, progress: bool = False, estimator: Estimator | None = None) -> tuple[list[PoseEstimate], Estimator]:
+                    score_thresh: float = 0.5, progress: bool = False, estimator: Estimator | None = None,
+                    indices=None) -> tuple[list[PoseEstimate], Estimator]:
     """Estimate poses on every image of a dataset (disk reads are not timed).
 
     Args:
         data: a DatasetReader or a dataset path. pose, refiner, iterations, icp, colour_verify, device,
             score_thresh: see :class:`Estimator`. masks: ``"gt"`` or a prediction directory of
             ``sixdpose segment``. split: BOP split. limit: first N images only (0: all).
+            indices: positions in ``reader.keys()`` of the images to predict (None: ``limit`` decides).
     Returns:
         ``(estimates, estimator)``.
     Raises:
@@ -276,7 +278,8 @@ def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: 
                                  reader=reader, score_thresh=score_thresh)
     if masks != "gt" and not Path(masks).is_dir():
         raise PoseError(f"{masks}: prediction directory not found (use --masks gt for ground-truth masks)")
-    keys = reader.keys()[:limit] if limit else reader.keys()
+    keys = reader.keys()
+    keys = [keys[i] for i in indices] if indices is not None else (keys[:limit] if limit else keys)
     out: list[PoseEstimate] = []
     from tqdm.auto import tqdm
 
