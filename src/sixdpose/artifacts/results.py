@@ -163,7 +163,15 @@ def _ram_gib() -> float | None:
 
 
 def _gpus() -> list[str]:
-    """Names of the CUDA devices torch sees (empty without torch or without a GPU)."""
+    """Names of the CUDA devices torch sees (empty without torch or without a GPU).
+
+    torch is imported only where it can see a device: already loaded by the process, or an NVIDIA
+    driver is installed (``nvidia-smi`` on the PATH). A CPU-only machine answers at once (importing
+    torch to learn that there is no GPU costs seconds per ``sixdpose evaluate``)."""
+    import shutil
+
+    if "torch" not in sys.modules and shutil.which("nvidia-smi") is None:
+        return []
     try:
         import torch
     except ImportError:
