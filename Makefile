@@ -15,7 +15,7 @@ UV := $(PYTHON_SYS) -m uv
 VENV := .venv
 PY := $(VENV)/bin/python
 APT_PKGS := libegl1 libgl1-mesa-dri libgbm1 libglib2.0-0 libusb-1.0-0
-LATEX_PKGS := latexmk texlive-latex-recommended texlive-latex-extra texlive-fonts-recommended poppler-utils
+LATEX_PKGS := latexmk texlive-latex-recommended texlive-latex-extra texlive-fonts-recommended lmodern poppler-utils
 WITH_LATEX ?=
 SIXDPOSE_YCB ?= $(abspath ../shared/data/ycb)
 export SIXDPOSE_YCB
@@ -86,7 +86,7 @@ demo smoke: reproduce
 evaluations: $(STAGES) $(RESULTS)
 
 # the tables and figures of notebook 07 (Tables I-III, per object, Fig. 7, accuracy vs threshold)
-tables: $(TEX_OUT)
+tables: $(TEX_OUT) $(FIG_OUT)
 
 paper: $(if $(HAVE_LATEX),$(PDF_DIR)/paper.pdf)
 

@@ -19,6 +19,8 @@
 #   VAL_GEN     generator profile of the validation split scored every epoch by train-pose (- : none)
 #   SEG         `sixdpose train-seg --profile`
 #   POSE        `sixdpose train-pose --profile` and `train-refiner --profile`
+#   METHODS     the pose methods run on every split and mask source: all (mk/reproduce.mk's METHODS) or
+#               few (FEW_METHODS: one per kind of row, to keep CI short)
 #   LIMIT       images per pose method and split (register / predict-pose / evaluate --limit; 0: all)
 #   NB04        images per method in notebook 04's own comparison (an illustration; the tables of
 #               record come from the graph's results)
@@ -30,8 +32,9 @@ SINGLE_GEN := smoke_single demo_single  test_single  test_single
 VAL_GEN    := -            -            val          val
 SEG        := smoke        smoke        cpu          paper
 POSE       := smoke        smoke        cpu          paper
+METHODS    := few          all          all          all
 LIMIT      := 0            0            0            0
-NB04       := 2            3            20           100
+NB04       := 2            2            20           100
 
 # ---- the column of $(PROFILE) ----
 _IDX := $(strip $(foreach i,1 2 3 4 5 6 7 8,$(if $(filter $(PROFILE),$(word $(i),$(PROFILES))),$(i))))
@@ -46,6 +49,7 @@ P_SINGLE_GEN := $(call _col,SINGLE_GEN)
 P_VAL_GEN    := $(filter-out -,$(call _col,VAL_GEN))
 P_SEG        := $(call _col,SEG)
 P_POSE       := $(call _col,POSE)
+P_METHODS    := $(call _col,METHODS)
 P_LIMIT      := $(call _col,LIMIT)
 P_NB04       := $(call _col,NB04)
 

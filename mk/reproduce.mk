@@ -22,8 +22,11 @@ LMO ?=
 LMO_SPLIT ?= test
 LMO_TRAIN_SPLIT ?= train_pbr
 
-HYBRID  := ransac ransac_icp fgr fgr_icp super4pcs super4pcs_icp
-LEARNED := learned_it0 learned_it2 learned_it2_icp learned_it2_colour
+ALL_HYBRID  := ransac ransac_icp fgr fgr_icp super4pcs super4pcs_icp
+ALL_LEARNED := learned_it0 learned_it2 learned_it2_icp learned_it2_colour
+FEW_METHODS := ransac_icp super4pcs learned_it0 learned_it2
+HYBRID  := $(if $(filter few,$(P_METHODS)),$(filter $(FEW_METHODS),$(ALL_HYBRID)),$(ALL_HYBRID))
+LEARNED := $(if $(filter few,$(P_METHODS)),$(filter $(FEW_METHODS),$(ALL_LEARNED)),$(ALL_LEARNED))
 METHODS := $(HYBRID) $(LEARNED)
 SPLITS  := test single
 MASKS   := gt pred
@@ -85,7 +88,7 @@ $(POSES)/$(1)_$(2)_$(3).csv: $(DATA_$(1))/manifest.json $(NEEDS_$(3)) $(if $(fil
 	$(SIXDPOSE) $(CMD_$(3)) --data $(DATA_$(1)) $(if $(filter pred,$(2)),$(call ARGS_$(firstword $(CMD_$(3)))_pred,$(1)),$(ARGS_$(firstword $(CMD_$(3)))_gt)) $(_limit) --no-progress --out $$@
 
 $(RES)/$(1)_$(2)_$(3).json: $(POSES)/$(1)_$(2)_$(3).csv $(DATA_$(1))/manifest.json | $(VENV_OK)
-	$(SIXDPOSE) evaluate --data $(DATA_$(1)) --results $$< --no-bop --all-images $(_limit) --label $(1)_$(2)_$(3) \
+	$(SIXDPOSE) evaluate --data $(DATA_$(1)) --results $$< --no-bop --no-progress --all-images $(_limit) --label $(1)_$(2)_$(3) \
 	  --result-name $(1)_$(2)_$(3) --results-dir $(RES)
 endef
 $(foreach s,$(SPLITS),$(foreach k,$(MASKS),$(foreach m,$(METHODS),$(eval $(call pose_rule,$(s),$(k),$(m))))))
@@ -109,7 +112,7 @@ $(POSES)/lmo_$(1)_$(2).csv: $(if $(filter pred,$(1)),$(RUNS)/masks/lmo/meta.json
 	$(SIXDPOSE) $(CMD_$(2)) --data $(LMO) --split $(LMO_SPLIT) $(if $(filter pred,$(1)),$(call ARGS_register_pred,lmo),$(ARGS_register_gt)) $(_limit) --no-progress --out $$@
 
 $(RES)/lmo_$(1)_$(2).json: $(POSES)/lmo_$(1)_$(2).csv | $(VENV_OK)
-	$(SIXDPOSE) evaluate --data $(LMO) --split $(LMO_SPLIT) --results $$< --all-images $(_limit) --label lmo_$(1)_$(2) \
+	$(SIXDPOSE) evaluate --data $(LMO) --split $(LMO_SPLIT) --results $$< --no-progress --all-images $(_limit) --label lmo_$(1)_$(2) \
 	  --result-name lmo_$(1)_$(2) --results-dir $(RES)
 endef
 $(foreach k,$(MASKS),$(foreach m,$(HYBRID),$(eval $(call lmo_rule,$(k),$(m)))))
@@ -152,10 +155,12 @@ $(EXEC)/08_real_data.ipynb: notebooks/08_real_data.ipynb $(TRAIN_DIR)/manifest.j
 	$(call papermill,$<,-p PROFILE $(PROFILE) -p WORKERS $(WORKERS) $(NB_FIG))
 
 # notebook 07 reads results/P/ only (and, for Fig. 7, the results CSV and dataset a result names)
-TEX_OUT := $(addprefix $(GEN)/,macros.tex table1.tex table2.tex table3.tex table_dataset.tex per_object_test_gt.tex \
-	per_object_single_pred.tex)
-$(EXEC)/07_evaluation.ipynb $(TEX_OUT) &: notebooks/07_evaluation.ipynb $(RESULTS) $(EXEC)/02_dataset_overview.ipynb | $(VENV_OK)
-	$(call papermill,$<,-p PROFILE $(PROFILE) -p RESULTS ../$(RES) -p TEX ../$(GEN) $(NB_FIG))
+TEX_OUT := $(addprefix $(GEN)/,macros.tex table1.tex table2.tex table3.tex table_dataset.tex \
+	$(foreach s,$(SPLITS),$(foreach k,$(MASKS),per_object_$(s)_$(k).tex)))
+FIG_OUT := $(addprefix $(FIG)/,fig7.png accuracy_threshold.png table1.csv table2.csv table3.csv)
+$(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT) &: notebooks/07_evaluation.ipynb $(RESULTS) $(EXEC)/02_dataset_overview.ipynb \
+	| $(VENV_OK)
+	$(call papermill,$<,-p PROFILE $(PROFILE) -p RESULTS ../$(RES) -p TEX ../$(GEN) -p TRAIN_DATA ../$(TRAIN_DIR) $(NB_FIG))
 
 NOTEBOOKS := $(addprefix $(EXEC)/,01_generate_dataset.ipynb 02_dataset_overview.ipynb 03_train_segmentation.ipynb \
 	04_hybrid_registration.ipynb 05_train_pose_network.ipynb 06_train_refiner.ipynb 07_evaluation.ipynb 08_real_data.ipynb)
@@ -165,7 +170,7 @@ NOTEBOOKS := $(addprefix $(EXEC)/,01_generate_dataset.ipynb 02_dataset_overview.
 PAPER_SRC := $(wildcard paper/*.tex paper/*.bib)
 LATEXMK := latexmk
 HAVE_LATEX := $(shell command -v $(LATEXMK) >/dev/null 2>&1 && command -v pdflatex >/dev/null 2>&1 && echo yes)
-$(PDF_DIR)/paper.pdf paper/paper.pdf &: $(PAPER_SRC) $(TEX_OUT) $(EXEC)/07_evaluation.ipynb
+$(PDF_DIR)/paper.pdf paper/paper.pdf &: $(PAPER_SRC) $(TEX_OUT) $(FIG_OUT) $(EXEC)/02_dataset_overview.ipynb
 	@mkdir -p $(PDF_DIR)
 	cd paper && TEXINPUTS=generated/$(PROFILE)//:../$(FIG)//: $(LATEXMK) -pdf -interaction=nonstopmode -halt-on-error \
 	  -quiet -outdir=build/$(PROFILE) paper.tex >build/$(PROFILE)/latexmk.log 2>&1 \

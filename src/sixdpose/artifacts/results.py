@@ -196,6 +196,16 @@ def hardware() -> dict:
             "gpus": _gpus(), "machine": platform.machine(), "os": platform.system()}
 
 
+def machine_text(prov: dict) -> str:
+    """The machine of a result's provenance in one line, e.g. ``"AMD EPYC 7B13 (2 CPUs, 23.5 GiB), no GPU"``
+    (CPUs: those the process could use)."""
+    hw = prov.get("hardware") or {}
+    gpus = hw.get("gpus") or []
+    cpus = hw.get("cpus_available") or hw.get("cpu_count")
+    ram = f", {hw['ram_gib']:g} GiB" if hw.get("ram_gib") else ""
+    return f"{hw.get('cpu', '?')} ({cpus} CPUs{ram}), " + (", ".join(gpus) if gpus else "no GPU")
+
+
 def _command(argv: list[str]) -> list[str]:
     """``argv`` with its program shortened: the console script as ``sixdpose``, a script inside the
     source checkout relative to it (``benchmarks/pose.py``), anything else by its base name."""

@@ -24,6 +24,7 @@ def register(sub) -> None:
                    help="evaluate the first N images of the split, with or without rows (as register / predict-pose "
                         "--limit N ran them; 0: all)")
     p.add_argument("--label", default=None, help="method label for the tables (default: results file stem)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-bop", action="store_true",
                    help="skip the BOP 2019 scores (AR_VSD, AR_MSSD, AR_MSPD, AR) and the ADD-S AUC")
     g = p.add_argument_group("result artifact")
@@ -63,7 +64,7 @@ def _run(args) -> int:
 
         raise UserError(f"--limit: expected N >= 0 images, got {args.limit}")
     images = ds.keys()[: args.limit] if args.limit else (ds.keys() if args.all_images else None)
-    res = evaluate(ds, ests, min_px=args.min_px, threshold=args.threshold, progress=True, images=images,
+    res = evaluate(ds, ests, min_px=args.min_px, threshold=args.threshold, progress=not args.no_progress, images=images,
                    bop=not args.no_bop)
     claim_output_dir(out, "evaluate")
     write_tables(res, out, label=args.label or res_path.stem)
