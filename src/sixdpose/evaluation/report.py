@@ -276,8 +276,8 @@ def write_per_object(entries: dict, split: str, masks: str, csv_path, tex_path) 
     rows = per_object(entries, split, masks)
     methods = [m for m in METHODS if rows and any(r.get(m.key) is not None for r in rows)]
     table = rows or [{"obj_id": "", "name": f"no results for {split} / {masks}", "n_gt": ""}]
-    short = {"ransac": "RANSAC", "ransac_icp": "+ICP", "fgr": "FGR", "fgr_icp": "+ICP", "super4pcs": "S4PCS",
-             "super4pcs_icp": "+ICP", "learned_it0": "L0", "learned_it2": "L2", "learned_it2_icp": "L2+ICP",
+    short = {"ransac": "RANSAC", "ransac_icp": "RANSAC+ICP", "fgr": "FGR", "fgr_icp": "FGR+ICP", "super4pcs": "S4PCS",
+             "super4pcs_icp": "S4PCS+ICP", "learned_it0": "L0", "learned_it2": "L2", "learned_it2_icp": "L2+ICP",
              "learned_it2_colour": "L2+col."}
     cols = ["obj_id", "name", "n_gt"] + [m.key for m in methods]
     write_table([{c: (_val(r.get(c)) if c in METHOD else r.get(c)) for c in cols} for r in table], cols, csv_path, tex_path,
@@ -405,9 +405,13 @@ def _manifest(path: Path) -> dict | None:
         return None
 
 
+def _images(n) -> str:
+    return "n/a" if n is None else f"{_num(n, 0)} image{'' if n == 1 else 's'}"
+
+
 def dataset_values(entries: dict, root: str | Path = ".", train_data: str | Path | None = None) -> dict[str, str]:
     """Sizes of the datasets behind the results, for the write-up's ``\\val{...}`` macros:
-    ``images@<split>`` and ``seed@<split>`` for each split with results (from the manifest of the dataset
+    ``images@<split>`` (``"200 images"``) and ``seed@<split>`` for each split with results (from the manifest of the dataset
     the result names, relative to ``root``), and ``images@train`` from ``train_data``; ``n/a`` where the
     dataset is not here."""
     out: dict[str, str] = {}
@@ -415,10 +419,10 @@ def dataset_values(entries: dict, root: str | Path = ".", train_data: str | Path
         e = next((e for k, e in sorted(entries.items()) if k[0] == split), None)
         data = (e.result.config or {}).get("data") if e is not None else None
         man = _manifest(Path(root) / data) if data else None
-        out[f"images@{split}"] = _num(man.get("num_images"), 0) if man else "n/a"
+        out[f"images@{split}"] = _images(man.get("num_images")) if man else "n/a"
         out[f"seed@{split}"] = str(man.get("seed")) if man and man.get("seed") is not None else "n/a"
     man = _manifest(Path(train_data)) if train_data else None
-    out["images@train"] = _num(man.get("num_images"), 0) if man else "n/a"
+    out["images@train"] = _images(man.get("num_images")) if man else "n/a"
     return out
 
 
@@ -506,8 +510,11 @@ def macros(entries: dict, profile: str, extra: dict | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _pts(d: float) -> str:
-    return f"{abs(d):.2f} points {'higher' if d > 0 else 'lower' if d < 0 else '(no change)'}".replace(" points (no change)", " points: no change")
+def _cmp(d: float) -> str:
+    """``"3.20 points higher than"``, ``"3.20 points lower than"`` or ``"equal to"`` (``d`` in points, 2 decimals)."""
+    if round(d, 2) == 0:
+        return "equal to"
+    return f"{abs(d):.2f} points {'higher' if d > 0 else 'lower'} than"
 
 
 def _mean_change(entries: dict, pairs: list[tuple[tuple, tuple]]) -> tuple[float, int, tuple | None] | None:
@@ -537,8 +544,8 @@ def findings(entries: dict) -> dict[str, str]:
     ph = max(v for k, v in TABLES["III"].rows.items() if "Hybrid" in k)
     pl = max(v for k, v in TABLES["III"].rows.items() if "Full Learning" in k)
     if mh is not None and ml is not None:
-        out["setting"] = (f"the best hybrid method ({mh.label}, {ah:.2f} %) is {_pts(ah - al)} than the best learned one "
-                          f"({ml.label}, {al:.2f} %); in the paper the best hybrid row is {_pts(ph - pl)} than the best "
+        out["setting"] = (f"the best hybrid method ({mh.label}, {ah:.2f} %) is {_cmp(ah - al)} the best learned one "
+                          f"({ml.label}, {al:.2f} %); in the paper the best hybrid row is {_cmp(ph - pl)} the best "
                           f"learned one ({ph:.2f} against {pl:.2f} %)")
     else:
         out["setting"] = "n/a (the single-instance, predicted-mask results of a hybrid and a learned method are needed)"
@@ -548,7 +555,9 @@ def findings(entries: dict) -> dict[str, str]:
         if r is None:
             return f"n/a (no {what} pair of results)"
         mean, n, (d, k) = r
-        return (f"ADD(-S) accuracy {b} is {_pts(mean)} than {a} on average over {n} method{'s' if n > 1 else ''} "
+        if n == 1:
+            return f"ADD(-S) accuracy {b} is {_cmp(mean)} {a}"
+        return (f"ADD(-S) accuracy {b} is {_cmp(mean)} {a} on average over {n} methods "
                 f"(largest change: {METHOD[k[2]].label}, {d:+.2f} points)")
 
     keys = [m.key for m in METHODS]
