@@ -17,6 +17,7 @@ PY := $(VENV)/bin/python
 APT_PKGS := libegl1 libgl1-mesa-dri libgbm1 libglib2.0-0 libusb-1.0-0
 LATEX_PKGS := latexmk texlive-latex-recommended texlive-latex-extra texlive-fonts-recommended lmodern poppler-utils
 WITH_LATEX ?=
+APT_STAMP := $(VENV)/.apt$(if $(WITH_LATEX),-latex)
 SIXDPOSE_YCB ?= $(abspath ../shared/data/ycb)
 export SIXDPOSE_YCB
 WORKERS ?= 2
@@ -40,17 +41,21 @@ include mk/reproduce.mk
 
 setup: apt venv
 
+# LaTeX packages without their recommendations (documentation, fonts the write-up does not use)
 apt:
-	@pkgs="$(APT_PKGS) $(if $(WITH_LATEX),$(LATEX_PKGS))"; \
-	if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
-	  missing=$$(for p in $$pkgs; do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
-	  if [ -n "$$missing" ]; then echo "installing:" $$missing; \
-	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing >/dev/null; fi; \
-	else echo "not root: make sure these Debian packages are installed: $$pkgs"; fi
+	@if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	  missing=$$(for p in $(APT_PKGS); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
+	  latex=$$(for p in $(if $(WITH_LATEX),$(LATEX_PKGS)); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
+	  if [ -n "$$missing$$latex" ]; then echo "installing:" $$missing $$latex; apt-get update -qq || exit 1; fi; \
+	  if [ -n "$$missing" ]; then DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null || exit 1; fi; \
+	  if [ -n "$$latex" ]; then DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$latex >/dev/null || exit 1; fi; \
+	else echo "not root: make sure these Debian packages are installed: $(APT_PKGS) $(if $(WITH_LATEX),$(LATEX_PKGS))"; fi
 
-# the graph's file targets wait for the set-up (order-only prerequisites: it never makes them out of date)
-$(VENV)/.apt: | $(VENV)/.synced
-	@$(MAKE) --no-print-directory apt && touch $@
+# the graph's file targets wait for the set-up (order-only prerequisites: it never makes them out of date);
+# WITH_LATEX=1 has its own stamp, so `make demo WITH_LATEX=1` installs LaTeX once even after a plain set-up
+$(APT_STAMP): | $(VENV)/.synced
+	@$(MAKE) --no-print-directory apt
+	@touch $@
 
 venv: $(VENV)/.synced
 

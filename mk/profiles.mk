@@ -39,7 +39,7 @@ NB04       := 2            2            20           100
 # ---- the column of $(PROFILE) ----
 _IDX := $(strip $(foreach i,1 2 3 4 5 6 7 8,$(if $(filter $(PROFILE),$(word $(i),$(PROFILES))),$(i))))
 ifeq ($(_IDX),)
-$(error PROFILE=$(PROFILE): use one of $(PROFILES))
+$(error PROFILE=$(PROFILE): use one of $(strip $(PROFILES)))
 endif
 _col = $(word $(_IDX),$($(1)))
 

@@ -17,7 +17,7 @@
 # LMO=/path/to/lmo (a full BOP LM-O with depth) adds the LM-O rows of Table I.
 
 SIXDPOSE := $(VENV)/bin/sixdpose
-VENV_OK := $(VENV)/.synced $(VENV)/.apt
+VENV_OK := $(VENV)/.synced $(APT_STAMP)
 LMO ?=
 LMO_SPLIT ?= test
 LMO_TRAIN_SPLIT ?= train_pbr
@@ -169,8 +169,9 @@ NOTEBOOKS := $(addprefix $(EXEC)/,01_generate_dataset.ipynb 02_dataset_overview.
 # paper/build/P/paper.pdf per profile; paper/paper.pdf is a copy of the last one built
 PAPER_SRC := $(wildcard paper/*.tex paper/*.bib)
 LATEXMK := latexmk
-HAVE_LATEX := $(shell command -v $(LATEXMK) >/dev/null 2>&1 && command -v pdflatex >/dev/null 2>&1 && echo yes)
-$(PDF_DIR)/paper.pdf paper/paper.pdf &: $(PAPER_SRC) $(TEX_OUT) $(FIG_OUT) $(EXEC)/02_dataset_overview.ipynb
+# LaTeX is there, or WITH_LATEX=1 installs it before any target runs (order-only $(APT_STAMP))
+HAVE_LATEX := $(if $(WITH_LATEX),yes,$(shell command -v $(LATEXMK) >/dev/null 2>&1 && command -v pdflatex >/dev/null 2>&1 && echo yes))
+$(PDF_DIR)/paper.pdf paper/paper.pdf &: $(PAPER_SRC) $(TEX_OUT) $(FIG_OUT) $(EXEC)/02_dataset_overview.ipynb | $(VENV_OK)
 	@mkdir -p $(PDF_DIR)
 	cd paper && TEXINPUTS=generated/$(PROFILE)//:../$(FIG)//: $(LATEXMK) -pdf -interaction=nonstopmode -halt-on-error \
 	  -quiet -outdir=build/$(PROFILE) paper.tex >build/$(PROFILE)/latexmk.log 2>&1 \
