@@ -171,7 +171,8 @@ PAPER_SRC := $(wildcard paper/*.tex paper/*.bib)
 LATEXMK := latexmk
 # LaTeX is there, or WITH_LATEX=1 installs it before any target runs (order-only $(APT_STAMP))
 HAVE_LATEX := $(if $(WITH_LATEX),yes,$(shell command -v $(LATEXMK) >/dev/null 2>&1 && command -v pdflatex >/dev/null 2>&1 && echo yes))
-$(PDF_DIR)/paper.pdf paper/paper.pdf &: $(PAPER_SRC) $(TEX_OUT) $(FIG_OUT) $(EXEC)/02_dataset_overview.ipynb | $(VENV_OK)
+$(PDF_DIR)/paper.pdf paper/paper.pdf &: $(PAPER_SRC) $(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT) $(EXEC)/02_dataset_overview.ipynb \
+	| $(VENV_OK)
 	@mkdir -p $(PDF_DIR)
 	cd paper && TEXINPUTS=generated/$(PROFILE)//:../$(FIG)//: $(LATEXMK) -pdf -interaction=nonstopmode -halt-on-error \
 	  -quiet -outdir=build/$(PROFILE) paper.tex >build/$(PROFILE)/latexmk.log 2>&1 \

@@ -128,6 +128,10 @@ def test_macros_hold_every_number_and_findings(results):
     assert "15.00 points higher than" in f["finding@icp"] and "5.00 points higher than" in f["finding@refine"]
     assert f["finding@colour"].startswith("n/a") and f["finding@masks"].startswith("ADD(-S) accuracy with predicted masks is 20.00 points lower")
     assert f["finding@threshold"].startswith("Super4PCS goes from 30.00 % at 5 % of the diameter to 100.00 % at 20 %")
+    _res(results, "single_pred_fgr", 60.0)
+    _res(results, "single_pred_fgr_icp", 60.0)
+    tied = report.load_entries(results)
+    assert "\\csname sdp@best@single@pred@hybrid\\endcsname{FGR, FGR + ICP and 1 more (tied)}" in report.macros(tied, "cpu")
     assert "\\smallprofilefalse" in report.macros(e, "cpu")
     assert "\\lmofalse" in report.macros({}, "paper")  # no results at all still gives a usable file
 

@@ -276,9 +276,10 @@ def write_per_object(entries: dict, split: str, masks: str, csv_path, tex_path) 
     rows = per_object(entries, split, masks)
     methods = [m for m in METHODS if rows and any(r.get(m.key) is not None for r in rows)]
     table = rows or [{"obj_id": "", "name": f"no results for {split} / {masks}", "n_gt": ""}]
-    short = {"ransac": "RANSAC", "ransac_icp": "RANSAC+ICP", "fgr": "FGR", "fgr_icp": "FGR+ICP", "super4pcs": "S4PCS",
-             "super4pcs_icp": "S4PCS+ICP", "learned_it0": "L0", "learned_it2": "L2", "learned_it2_icp": "L2+ICP",
-             "learned_it2_colour": "L2+col."}
+    two = "\\shortstack[r]{{{}\\\\{}}}".format  # a header on two lines keeps the columns as narrow as the numbers
+    short = {"ransac": "RANSAC", "ransac_icp": two("RANSAC", "+ICP"), "fgr": "FGR", "fgr_icp": two("FGR", "+ICP"),
+             "super4pcs": "S4PCS", "super4pcs_icp": two("S4PCS", "+ICP"), "learned_it0": "L0", "learned_it2": "L2",
+             "learned_it2_icp": two("L2", "+ICP"), "learned_it2_colour": two("L2", "+col.")}
     cols = ["obj_id", "name", "n_gt"] + [m.key for m in methods]
     write_table([{c: (_val(r.get(c)) if c in METHOD else r.get(c)) for c in cols} for r in table], cols, csv_path, tex_path,
                 headers=["Id", "Object", "GT"] + [short[m.key] for m in methods], digits=1,
@@ -450,8 +451,13 @@ def _best(entries: dict, split: str, masks: str, kind: str) -> tuple[Method | No
              if s == split and k == masks and METHOD[m].kind == kind and e.figure("accuracy") is not None]
     if not cands:
         return None, None
-    acc, m = max(cands, key=lambda c: c[0])
-    return m, acc
+    acc = max(c[0] for c in cands)
+    tied = [m for m in METHODS if any(c[1] == m and round(c[0], 2) == round(acc, 2) for c in cands)]
+    if len(tied) == 1:
+        return tied[0], acc
+    names = [m.label for m in tied]
+    label = " and ".join(names) if len(names) == 2 else f"{names[0]}, {names[1]} and {len(names) - 2} more"
+    return Method(tied[0].key, f"{label} (tied)", kind), acc
 
 
 def macros(entries: dict, profile: str, extra: dict | None = None) -> str:
