@@ -1,7 +1,7 @@
 # The profiles of the `make reproduce` graph (mk/reproduce.mk), in one table.
 #
 #   PROFILE=smoke  CI: the whole graph on a handful of images in a few minutes (numbers mean nothing)
-#   PROFILE=demo   `make demo`: the same graph at laptop scale (about 25 min on a 2-core CPU; pipeline checks)
+#   PROFILE=demo   `make demo`: the same graph at laptop scale (19 min on a shared 2-core CPU; pipeline checks)
 #   PROFILE=cpu    the committed results (results/cpu/): the train / val / test splits, the `cpu` profile
 #                  of every stage; several hours on a 2-core CPU
 #   PROFILE=paper  the paper's scale on a GPU machine: 25,000 training images, the `paper` profile of

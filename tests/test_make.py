@@ -35,7 +35,9 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
     gen = {re.search(r"--out (\S+)", line).group(1) for line in _lines(out, "generate")}
     assert gen >= {train, *splits}
     assert (f"data/val" in gen) == (profile in ("cpu", "paper"))
-    assert any(f"--out runs/{profile}/seg" in line for line in _lines(out, "train-seg")) and f"--profile {seg}" in out
+    seg_line = next(line for line in _lines(out, "train-seg") if f"--out runs/{profile}/seg" in line)
+    # a new run gets the profile; an interrupted one (last.pt in this checkout) is resumed
+    assert out.split(seg_line, 1)[1].lstrip().startswith((f"--profile {seg}", "--resume")) or "--resume" in seg_line
     assert len(_lines(out, "segment")) == 2
     poses = _lines(out, "register") + _lines(out, "predict-pose")
     assert len(poses) == 40 and len(_lines(out, "evaluate")) == 40  # 10 methods x 2 splits x 2 mask sources

@@ -222,10 +222,6 @@ def per_object(entries: dict, split: str, masks: str) -> list[dict]:
     return rows
 
 
-def _val(v):
-    return math.nan if v is None else v
-
-
 # --------------------------------------------------------------------------------------------
 # writers: CSV + LaTeX through sixdpose.artifacts.tables
 # --------------------------------------------------------------------------------------------
@@ -242,7 +238,7 @@ def write_table3(entries: dict, csv_path, tex_path) -> list[dict]:
     cols = ["method", "paper"] + [c for c, *_ in TABLE3_COLUMNS]
     sup = ("& \\multicolumn{1}{c}{paper} & \\multicolumn{2}{c}{single-instance subset} & \\multicolumn{2}{c}{multi-instance split} \\\\"
            "\n\\cmidrule(lr){2-2}\\cmidrule(lr){3-4}\\cmidrule(lr){5-6}")
-    write_table([{k: _val(v) if k != "method" else v for k, v in r.items()} for r in rows], cols, csv_path, tex_path,
+    write_table(rows, cols, csv_path, tex_path,
                 headers=["Method", "Table III", "pred.", "GT", "pred.", "GT"], super_header=sup, align="lrrrrr",
                 comment=_sources(entries, [k for k in entries if k[0] in ("test", "single")]))
     return rows
@@ -251,7 +247,7 @@ def write_table3(entries: dict, csv_path, tex_path) -> list[dict]:
 def write_table1(entries: dict, csv_path, tex_path) -> list[dict]:
     """Write :func:`table1` as CSV and LaTeX; returns its rows."""
     rows = table1(entries)
-    write_table([{k: _val(v) if k != "method" else v for k, v in r.items()} for r in rows], ["method", "paper", "lmo_gt", "lmo_pred"],
+    write_table(rows, ["method", "paper", "lmo_gt", "lmo_pred"],
                 csv_path, tex_path, headers=["Method", "paper Table I", "ours, GT masks", "ours, pred. masks"], align="lrrr",
                 comment=_sources(entries, [k for k in entries if k[0] == "lmo"]))
     return rows
@@ -263,7 +259,7 @@ def write_table2(entries: dict, csv_path, tex_path, split: str = "test") -> list
     sup = ("& \\multicolumn{1}{c}{paper} & \\multicolumn{2}{c}{GT masks} & \\multicolumn{2}{c}{pred. masks} & \\\\"
            "\n\\cmidrule(lr){2-2}\\cmidrule(lr){3-4}\\cmidrule(lr){5-6}")
     hw = "\n".join(f"machine {v}: {k}" for k, v in machines(entries).items())
-    write_table([{k: _val(v) if k not in ("method", "machine") else (v or "--") for k, v in r.items()} for r in rows],
+    write_table([dict(r, machine=r["machine"] or "--") for r in rows],
                 ["method", "paper", "fps_gt", "ips_gt", "fps_pred", "ips_pred", "machine"], csv_path, tex_path,
                 headers=["Method", "Table II FPS", "FPS", "inst/s", "FPS", "inst/s", "machine"], super_header=sup,
                 align="lrrrrrc", comment=_sources(entries) + ("\n" + hw if hw else ""))
@@ -281,7 +277,7 @@ def write_per_object(entries: dict, split: str, masks: str, csv_path, tex_path) 
              "super4pcs": "S4PCS", "super4pcs_icp": two("S4PCS", "+ICP"), "learned_it0": "L0", "learned_it2": "L2",
              "learned_it2_icp": two("L2", "+ICP"), "learned_it2_colour": two("L2", "+col.")}
     cols = ["obj_id", "name", "n_gt"] + [m.key for m in methods]
-    write_table([{c: (_val(r.get(c)) if c in METHOD else r.get(c)) for c in cols} for r in table], cols, csv_path, tex_path,
+    write_table([{c: r.get(c) for c in cols} for r in table], cols, csv_path, tex_path,
                 headers=["Id", "Object", "GT"] + [short[m.key] for m in methods], digits=1,
                 align="llr" + "r" * len(methods), comment=_sources(entries, [k for k in entries if k[:2] == (split, masks)]))
     return rows
@@ -612,8 +608,6 @@ def dataset_table(stats_csv: str | Path, tex_path) -> Path:
     need = ("quantity", "paper", "this dataset")
     if not rows or any(c not in rows[0] for c in need):
         raise ReportError(f"{stats_csv}: expected the columns {', '.join(need)}")
-    lines = ["\\begin{tabular}{p{0.34\\linewidth}p{0.28\\linewidth}p{0.28\\linewidth}}", "\\toprule",
-             "Quantity & Paper (section III) & This dataset \\\\", "\\midrule"]
-    lines += [" & ".join(tex_escape(r[c]) for c in need) + " \\\\" for r in rows]
-    lines += ["\\bottomrule", "\\end{tabular}", f"% from {stats_csv.name} (notebook 02)"]
-    return atomic_write_text(tex_path, "\n".join(lines) + "\n")
+    write_table(rows, list(need), None, tex_path, headers=["Quantity", "Paper (section III)", "This dataset"],
+                align="p{0.34\\linewidth}p{0.28\\linewidth}p{0.28\\linewidth}", comment=f"from {stats_csv.name} (notebook 02)")
+    return Path(tex_path)
