@@ -177,6 +177,7 @@ $(PDF_DIR)/paper.pdf paper/paper.pdf &: $(PAPER_SRC) $(EXEC)/07_evaluation.ipynb
 	cd paper && TEXINPUTS=generated/$(PROFILE)//:../$(FIG)//: $(LATEXMK) -pdf -interaction=nonstopmode -halt-on-error \
 	  -quiet -outdir=build/$(PROFILE) paper.tex >build/$(PROFILE)/latexmk.log 2>&1 \
 	  || { tail -40 build/$(PROFILE)/latexmk.log; exit 1; }
+	@touch $(PDF_DIR)/paper.pdf  # latexmk leaves the PDF alone when its inputs' contents did not change
 	cp $(PDF_DIR)/paper.pdf paper/.paper.pdf.tmp && mv paper/.paper.pdf.tmp paper/paper.pdf
 
 PDF := $(if $(HAVE_LATEX),$(PDF_DIR)/paper.pdf)
