@@ -101,8 +101,10 @@ def test_every_generated_input_is_written_by_notebook_07():
 
 @pytest.mark.slow
 @pytest.mark.skipif(shutil.which("latexmk") is None or shutil.which("pdflatex") is None, reason="LaTeX not installed")
-def test_the_write_up_builds_from_generated_files(tmp_path):
-    """paper.tex compiles against macros and tables generated from a few result files (no LM-O)."""
+@pytest.mark.parametrize("lmo", [False, True])
+def test_the_write_up_builds_from_generated_files(tmp_path, lmo):
+    """paper.tex compiles against macros and tables generated from a few result files (without and with
+    LM-O rows: the two branches of its Table I text)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -110,7 +112,8 @@ def test_the_write_up_builds_from_generated_files(tmp_path):
     from sixdpose.evaluation import report
 
     res = tmp_path / "results"
-    for i, name in enumerate(("single_pred_super4pcs", "test_gt_ransac_icp", "test_gt_learned_it2")):
+    names = ("single_pred_super4pcs", "test_gt_ransac_icp", "test_gt_learned_it2")
+    for i, name in enumerate(names + (("lmo_gt_ransac_icp", "lmo_gt_super4pcs") if lmo else ())):
         write_result(name, {"accuracy": 40.0 + i, "n_gt": 10, "n_correct": 4, "fps": 1.5, "instances_per_s": 6.0,
                             "n_images": 3}, rows=[{"obj_id": 1, "name": "055_baseball", "n_gt": 10, "add_s_accuracy": 40.0}],
                      results_dir=res)
@@ -136,6 +139,9 @@ def test_the_write_up_builds_from_generated_files(tmp_path):
     assert p.returncode == 0, p.stdout[-3000:]
     log = (out / "paper.log").read_text(errors="replace")
     assert (out / "paper.pdf").stat().st_size > 10000
-    assert "Pipeline check, not results" in subprocess.run(["pdftotext", str(out / "paper.pdf"), "-"], capture_output=True,
-                                                           text=True).stdout if shutil.which("pdftotext") else True
+    if shutil.which("pdftotext"):
+        text = subprocess.run(["pdftotext", str(out / "paper.pdf"), "-"], capture_output=True, text=True).stdout
+        assert "Pipeline check, not results" in text  # the smoke profile's banner
+        assert ("LM-O rows of ours were not run" in text) is not lmo
     assert "Undefined control sequence" not in log and "undefined references" not in log
+    assert ("no result lmo_gt_ransac_icp" in log) is False and ("sixdpose Warning: no result" in log) is True  # missing results warn
