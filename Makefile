@@ -1,9 +1,11 @@
 # sixdpose: make targets are the dependency graph of the project.
-#   make setup      system packages (as root) + .venv from uv.lock
-#   make test       everything CI runs: unit/integration tests + every notebook on the smoke profile
+#   make setup      system packages (as root) + .venv from uv.lock; WITH_LATEX=1 adds LaTeX (for `make paper`)
+#   make test       everything CI runs: unit/integration tests, then the smoke graph (every notebook on the smoke profile)
 #   make test-fast  the edit loop: tests without Drake generation or slow training (under 2 minutes)
-#   make demo       the whole chain at a small scale on a laptop CPU (data/demo, figures/)
-#   make reproduce  the paper-scale run (GPU machine): 25,000 images, all notebooks
+#   make demo       the whole graph at laptop scale (= make reproduce PROFILE=demo): every table, figure, the PDF
+#   make reproduce  the graph of mk/reproduce.mk for PROFILE (paper by default: GPU machine, 25,000 images);
+#                   files keyed by their inputs, so an interrupted run resumes; `make -n reproduce` prints the plan
+#   make paper      the write-up PDF of PROFILE (paper/build/PROFILE/paper.pdf, copied to paper/paper.pdf)
 #   make benchmark  the benchmark scripts (print their figures, write them to results/)
 #   make results-readme  rewrite the README's generated tables from results/ (results-check: only compare)
 
@@ -13,32 +15,60 @@ UV := $(PYTHON_SYS) -m uv
 VENV := .venv
 PY := $(VENV)/bin/python
 APT_PKGS := libegl1 libgl1-mesa-dri libgbm1 libglib2.0-0 libusb-1.0-0
+LATEX_PKGS := latexmk texlive-latex-recommended texlive-latex-extra texlive-fonts-recommended lmodern poppler-utils
+WITH_LATEX ?=
+APT_STAMP := $(VENV)/.apt$(if $(WITH_LATEX),-latex)
 SIXDPOSE_YCB ?= $(abspath ../shared/data/ycb)
 export SIXDPOSE_YCB
 WORKERS ?= 2
 PAPERMILL := $(PY) -m papermill --cwd notebooks --log-output --no-progress-bar
 
-.PHONY: setup apt venv test test-fast notebooks-sync demo reproduce benchmark results-readme results-check clean-data
+# the profile of the graph: `make demo` is PROFILE=demo, `make smoke` PROFILE=smoke, anything else paper
+_GOAL_PROFILE := $(filter demo smoke,$(MAKECMDGOALS))
+ifneq ($(_GOAL_PROFILE),)
+ifeq ($(origin PROFILE),command line)
+$(if $(filter-out $(_GOAL_PROFILE),$(PROFILE)),$(error make $(_GOAL_PROFILE) is PROFILE=$(_GOAL_PROFILE); run make reproduce PROFILE=$(PROFILE) instead))
+endif
+override PROFILE := $(firstword $(_GOAL_PROFILE))
+endif
+PROFILE ?= paper
+include mk/profiles.mk
+include mk/reproduce.mk
+
+.PHONY: setup apt venv test test-fast notebooks-sync demo smoke reproduce evaluations paper tables benchmark results-readme \
+	results-check
+.DELETE_ON_ERROR:
 
 setup: apt venv
 
+# LaTeX packages without their recommendations (documentation, fonts the write-up does not use)
 apt:
 	@if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
 	  missing=$$(for p in $(APT_PKGS); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
-	  if [ -n "$$missing" ]; then echo "installing: $$missing"; \
-	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; fi; \
-	else echo "not root: make sure these Debian packages are installed: $(APT_PKGS)"; fi
+	  latex=$$(for p in $(if $(WITH_LATEX),$(LATEX_PKGS)); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
+	  if [ -n "$$missing$$latex" ]; then echo "installing:" $$missing $$latex; apt-get update -qq || exit 1; fi; \
+	  if [ -n "$$missing" ]; then DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null || exit 1; fi; \
+	  if [ -n "$$latex" ]; then DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$latex >/dev/null || exit 1; fi; \
+	else echo "not root: make sure these Debian packages are installed: $(APT_PKGS) $(if $(WITH_LATEX),$(LATEX_PKGS))"; fi
+
+# the graph's file targets wait for the set-up (order-only prerequisites: it never makes them out of date);
+# WITH_LATEX=1 has its own stamp, so `make demo WITH_LATEX=1` installs LaTeX once even after a plain set-up
+$(APT_STAMP): | $(VENV)/.synced
+	@$(MAKE) --no-print-directory apt
+	@touch $@
 
 venv: $(VENV)/.synced
 
 $(VENV)/.synced: pyproject.toml uv.lock
 	@$(UV) --version >/dev/null 2>&1 || $(PYTHON_SYS) -m pip install -q uv
-	$(UV) sync --frozen --python 3.11 --extra test
+	$(UV) sync --frozen --python 3.11 --extra test --compile-bytecode
 	@touch $@
 
+# CI: the tests, then the smoke graph (every notebook executed by papermill on the smoke profile, on
+# top of the smoke graph's datasets, runs and results)
 test: setup
 	$(PY) -m pytest -p no:dash -q tests
-	SIXDPOSE_PROFILE=smoke $(PY) -m pytest -p no:dash -q --nbval-lax notebooks
+	$(MAKE) --no-print-directory smoke
 
 test-fast: setup
 	$(PY) -m pytest -p no:dash -q -m "not slow and not drake" tests
@@ -47,16 +77,23 @@ test-fast: setup
 notebooks-sync: setup
 	@for f in notebooks/[0-9]*.py; do $(VENV)/bin/jupytext --quiet --to ipynb --update "$$f"; done
 
-demo: setup
-	mkdir -p notebooks/executed figures
-	$(PAPERMILL) notebooks/01_generate_dataset.ipynb notebooks/executed/01_generate_dataset.ipynb -p PROFILE demo -p WORKERS $(WORKERS)
-	@for nb in notebooks/[0-9]*.ipynb; do case $$nb in *01_generate_dataset*) continue;; esac; \
-	  $(PAPERMILL) $$nb notebooks/executed/$$(basename $$nb) -p PROFILE demo || exit 1; done
+# the graph (mk/reproduce.mk): every result, table, figure and executed notebook of PROFILE, and the PDF
+# when LaTeX is installed
+reproduce: $(STAGES) $(RESULTS) $(NOTEBOOKS) $(PDF) | $(VENV_OK)
+ifeq ($(HAVE_LATEX),)
+ifneq ($(filter demo smoke reproduce paper,$(MAKECMDGOALS)),)
+$(info paper PDF skipped: latexmk/pdflatex not found (install them with `make setup WITH_LATEX=1`))
+endif
+endif
+demo smoke: reproduce
 
-reproduce: setup
-	mkdir -p notebooks/executed figures
-	@for nb in notebooks/[0-9]*.ipynb; do \
-	  $(PAPERMILL) $$nb notebooks/executed/$$(basename $$nb) -p PROFILE paper -p WORKERS $(WORKERS) || exit 1; done
+# the graph up to the result files (results/PROFILE/*.json), without notebooks and write-up
+evaluations: $(STAGES) $(RESULTS)
+
+# the tables and figures of notebook 07 (Tables I-III, per object, Fig. 7, accuracy vs threshold)
+tables: $(TEX_OUT) $(FIG_OUT)
+
+paper: $(if $(HAVE_LATEX),$(PDF_DIR)/paper.pdf)
 
 BENCHMARKS := generation segmentation registration colour_robustness
 

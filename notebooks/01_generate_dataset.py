@@ -6,12 +6,12 @@
 # %% tags=["parameters"]
 # Parameters: plain values only (papermill overrides them). None means "from the environment / the profile",
 # resolved in the next cell: PROFILE from $SIXDPOSE_PROFILE (the CI / headless switch, default "smoke").
-PROFILE = None  # smoke (CI), demo (laptop CPU), paper (GPU machine, 25,000 images)
+PROFILE = None  # a generator profile: smoke (CI), demo (laptop CPU), train / test / test_single (the cpu graph), paper (GPU machine, 25,000 images)
 DATA = None  # None: $SIXDPOSE_DATA, else ../data/<PROFILE>
 FIGURES = "../figures"
 SCENES = None  # None: the profile's number of scenes
 VIEWS = None
-SEED = 0
+SEED = None  # None: the profile's seed
 WORKERS = 2
 
 # %%

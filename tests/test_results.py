@@ -30,10 +30,11 @@ def test_readme_blocks_match_results():
 
 
 def test_every_result_file_reads():
-    names = sorted(p.stem for p in (REPO / "results").glob("*.json"))
-    for n in names:
-        r = read_result(n, REPO / "results")
-        assert r.provenance["date"].endswith("Z") and r.provenance["command"], n
+    paths = sorted((REPO / "results").rglob("*.json"))
+    assert paths, "results/ has no result file"
+    for p in paths:
+        r = read_result(p)
+        assert r.provenance["date"].endswith("Z") and r.provenance["command"], p
 
 
 # --------------------------------------------------------------------------------------------
@@ -195,15 +196,15 @@ def _eval_result(res_dir, name, acc, ips=4.5):
 
 
 def test_curated_block_has_the_papers_column(tmp_path):
-    for name, acc in [("eval_test_ransac_icp", 92.14), ("eval_test_kinect_ransac_icp", 74.8),
-                      ("eval_test_super4pcs_icp", 92.49), ("eval_test_kinect_super4pcs_icp", 84.08)]:
-        _eval_result(tmp_path, name, acc)
+    for name, acc in [("test_gt_ransac_icp", 92.14), ("test_kinect_gt_ransac_icp", 74.8),
+                      ("test_gt_super4pcs_icp", 92.49), ("test_kinect_gt_super4pcs_icp", 84.08)]:
+        _eval_result(tmp_path / "cpu", name, acc)
     md = render_block("depth_noise", tmp_path)
     lines = md.splitlines()
     assert "paper Table III" in lines[0]
     assert lines[2].startswith("| RANSAC + ICP | 53.55 | 92.14 | 74.80 | 1464 |")
     assert lines[3].startswith("| Super4PCS + ICP |  | 92.49 | 84.08 |")  # the paper has no Super4PCS + ICP row
-    assert "`results/eval_test_ransac_icp.json`" in md and "commit" in md
+    assert "`results/cpu/test_gt_ransac_icp.json`" in md and "commit" in md
     assert set(BLOCKS) >= {"learned_cpu_summary", "learned_cpu_per_object", "depth_noise", "ycbv_bop"}
 
 

@@ -68,6 +68,24 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 
+def write_if_changed(path: str | os.PathLike, data: bytes | str) -> bool:
+    """Write ``data`` (bytes, or text written as UTF-8) to ``path`` atomically unless the file already
+    holds exactly these bytes; returns True if it was written.
+
+    A re-run that would produce the same file leaves it (and its modification time) untouched, so a
+    make target keyed on it stays up to date (``make reproduce`` resumes instead of starting over).
+    """
+    path = Path(path)
+    data = data.encode("utf-8") if isinstance(data, str) else data
+    try:
+        if path.is_file() and path.stat().st_size == len(data) and path.read_bytes() == data:
+            return False
+    except OSError:
+        pass
+    atomic_write_bytes(path, data)
+    return True
+
+
 def atomic_write_json(path: str | os.PathLike, obj, indent: int | None = 1, sort_keys: bool = False) -> Path:
     """Write ``obj`` as JSON (plus a newline) to ``path`` atomically; returns ``path``."""
     return atomic_write_text(path, json.dumps(obj, indent=indent, sort_keys=sort_keys) + "\n")

@@ -163,7 +163,15 @@ def _ram_gib() -> float | None:
 
 
 def _gpus() -> list[str]:
-    """Names of the CUDA devices torch sees (empty without torch or without a GPU)."""
+    """Names of the CUDA devices torch sees (empty without torch or without a GPU).
+
+    torch is imported only where it can see a device: already loaded by the process, or an NVIDIA
+    driver is installed (``nvidia-smi`` on the PATH). A CPU-only machine answers at once (importing
+    torch to learn that there is no GPU costs seconds per ``sixdpose evaluate``)."""
+    import shutil
+
+    if "torch" not in sys.modules and shutil.which("nvidia-smi") is None:
+        return []
     try:
         import torch
     except ImportError:
@@ -186,6 +194,16 @@ def hardware() -> dict:
         avail = os.cpu_count()
     return {"cpu": _cpu_model(), "cpu_count": os.cpu_count(), "cpus_available": avail, "ram_gib": _ram_gib(),
             "gpus": _gpus(), "machine": platform.machine(), "os": platform.system()}
+
+
+def machine_text(prov: dict) -> str:
+    """The machine of a result's provenance in one line, e.g. ``"AMD EPYC 7B13 (2 CPUs, 23.5 GiB), no GPU"``
+    (CPUs: those the process could use)."""
+    hw = prov.get("hardware") or {}
+    gpus = hw.get("gpus") or []
+    cpus = hw.get("cpus_available") or hw.get("cpu_count")
+    ram = f", {hw['ram_gib']:g} GiB" if hw.get("ram_gib") else ""
+    return f"{hw.get('cpu', '?')} ({cpus} CPUs{ram}), " + (", ".join(gpus) if gpus else "no GPU")
 
 
 def _command(argv: list[str]) -> list[str]:

@@ -29,7 +29,7 @@ import numpy as np
 import yaml
 
 from ..constants import MERGED_MASK_CODES
-from ..fileio import atomic_write_bytes, atomic_write_text
+from ..fileio import atomic_write_bytes, atomic_write_text, write_if_changed
 
 try:
     _Dumper = yaml.CSafeDumper
@@ -126,8 +126,11 @@ def object_entry(obj_name: str, obj_id: int, inst: int, R: np.ndarray, t: np.nda
 
 # -- whole files ---------------------------------------------------------------------------------
 def write_gt(root: str | Path, gt: dict[int, dict]) -> Path:
-    """Write ``gt.yml`` (image number -> ``{scene_id, cam_K, objects, ...}``) atomically."""
-    return atomic_write_text(Path(root) / GT_FILE, yaml_text(gt))
+    """Write ``gt.yml`` (image number -> ``{scene_id, cam_K, objects, ...}``) atomically (left untouched
+    when it already holds the same text)."""
+    path = Path(root) / GT_FILE
+    write_if_changed(path, yaml_text(gt))
+    return path
 
 
 def write_models_info(root: str | Path, info: dict[str, dict]) -> Path:
@@ -136,8 +139,11 @@ def write_models_info(root: str | Path, info: dict[str, dict]) -> Path:
 
 
 def write_manifest(root: str | Path, manifest: dict) -> Path:
-    """Write ``manifest.json`` atomically (sorted keys)."""
-    return atomic_write_text(Path(root) / MANIFEST_FILE, json.dumps(manifest, indent=1, sort_keys=True))
+    """Write ``manifest.json`` atomically (sorted keys; left untouched when it already holds the same
+    text, so resuming a complete dataset does not make everything that depends on it out of date)."""
+    path = Path(root) / MANIFEST_FILE
+    write_if_changed(path, json.dumps(manifest, indent=1, sort_keys=True))
+    return path
 
 
 def write_files(root: str | Path, files: dict[str, bytes]) -> None:

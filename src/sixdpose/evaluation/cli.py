@@ -20,7 +20,11 @@ def register(sub) -> None:
     p.add_argument("--all-images", action="store_true",
                    help="evaluate every image of the split (default: the images in the results); use it with "
                         "predicted masks, where images without detections have no rows")
+    p.add_argument("--limit", type=int, default=0,
+                   help="evaluate the first N images of the split, with or without rows (as register / predict-pose "
+                        "--limit N ran them; 0: all)")
     p.add_argument("--label", default=None, help="method label for the tables (default: results file stem)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-bop", action="store_true",
                    help="skip the BOP 2019 scores (AR_VSD, AR_MSSD, AR_MSPD, AR) and the ADD-S AUC")
     g = p.add_argument_group("result artifact")
@@ -55,8 +59,13 @@ def _run(args) -> int:
         except ValueError:
             raise UserError(f"--symmetric-ids: expected comma-separated integers, got {args.symmetric_ids!r}") from None
     ds = open_dataset(args.data, split=args.split, **kw)
-    res = evaluate(ds, ests, min_px=args.min_px, threshold=args.threshold, progress=True,
-                   images=ds.keys() if args.all_images else None, bop=not args.no_bop)
+    if args.limit < 0:
+        from ..cli import UserError
+
+        raise UserError(f"--limit: expected N >= 0 images, got {args.limit}")
+    images = ds.keys()[: args.limit] if args.limit else (ds.keys() if args.all_images else None)
+    res = evaluate(ds, ests, min_px=args.min_px, threshold=args.threshold, progress=not args.no_progress, images=images,
+                   bop=not args.no_bop)
     claim_output_dir(out, "evaluate")
     write_tables(res, out, label=args.label or res_path.stem)
     if args.result_name is not None:
@@ -99,6 +108,7 @@ def _write_result(args, res, res_path: Path) -> None:
         results_dir=args.results_dir, command=getattr(args, "command_line", None),
         config={"data": str(args.data), "results": str(res_path), "split": args.split, "min_px": args.min_px,
                 "threshold": args.threshold, "symmetric_ids": args.symmetric_ids, "all_images": args.all_images,
+                "limit": args.limit,
                 "bop": not args.no_bop, "results_config": producer_cfg},
         inputs=inputs,
         notes="fps, instances_per_s and total_time come from the results CSV's per-image times (disk reads excluded), "

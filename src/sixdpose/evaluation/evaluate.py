@@ -9,6 +9,8 @@ Protocol (paper section V-A; matching as in the BOP toolkit):
 * Greedy matching in decreasing score: an estimate is matched to the still unmatched GT instance of
   its object with the smallest ADD(-S) error, if that error is below ``threshold`` x diameter; a
   matched GT instance counts as correct. ADD-S for symmetric objects, ADD otherwise (eq. 4).
+* Accuracy against the threshold (0-20 % of the diameter, :attr:`EvalResult.curve`): the same matching
+  redone at each threshold.
 * Timing: frames per second = images in the results / sum of their per-image times (each image's
   time once); instances per second = estimates / the same total. Times exclude disk reads.
 """
@@ -67,6 +69,9 @@ class EvalResult:
         bop: the BOP 2019 scores (:mod:`.bop`): ``ar``, ``ar_vsd``, ``ar_mssd``, ``ar_mspd`` and the
             YCB-Video ``adds_auc`` (percent), plus ``unannotated_symmetric_ids``; per object in
             ``per_object[obj_id]["bop"]``. Empty when not computed.
+        curve: accuracy against the threshold: ``{"threshold_pct": [...], "accuracy": [...]}``, the
+            threshold in % of the object's diameter (:data:`CURVE_THRESHOLDS_PCT`, 0-20 %), the accuracy
+            in % of the counted GT instances, each point with the matching redone at that threshold.
     """
 
     per_object: dict
@@ -81,10 +86,32 @@ class EvalResult:
     total_time: float
     records: list = field(default_factory=list)
     bop: dict = field(default_factory=dict)
+    curve: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
         """The scalar fields (and the BOP scores) as a dict (JSON-serialisable)."""
         return {k: v for k, v in self.__dict__.items() if k not in ("per_object", "records")}
+
+
+#: Thresholds of :attr:`EvalResult.curve`, % of the object's diameter: 0, 0.5, ..., 20.
+CURVE_THRESHOLDS_PCT = tuple(0.5 * i for i in range(41))
+
+
+def greedy_match(err: np.ndarray, limit: float) -> list[int | None]:
+    """Greedy matching of one image and object (BOP toolkit style): estimates (rows, in decreasing
+    score) each take the still unmatched GT instance (column) with the smallest error below ``limit``.
+
+    Args:
+        err: (n_estimates, n_gt) ADD(-S) errors (any unit). limit: the largest error that counts (same unit, exclusive).
+    Returns:
+        for each GT instance, the row index of its estimate, or None.
+    """
+    match: list[int | None] = [None] * err.shape[1]
+    for i in range(err.shape[0]):
+        cand = [(err[i, j], j) for j in range(err.shape[1]) if match[j] is None and err[i, j] < limit]
+        if cand:
+            match[min(cand)[1]] = i
+    return match
 
 
 def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate], min_px: int = 400,
@@ -134,6 +161,7 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
         eval_keys = [k for k in keys if k in by_img] if by_img else keys
     bop_err: dict[int, list] = defaultdict(list)
     syms: dict[int, list] = {}
+    rel_err: list[np.ndarray] = []  # per image and object: (estimates, GT) errors / diameter
     for key in tqdm(eval_keys, desc="evaluate", unit="img", disable=not progress):
         sample = dataset.load(key, masks=False, rgb=False, depth=bop and dataset.has_depth)
         gts = [g for g in sample.instances if g.px_visib < 0 or g.px_visib >= min_px]
@@ -143,17 +171,12 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
             e_o = sorted((e for e in ests if e.obj_id == oid and e.score > 0), key=lambda e: -e.score)[: len(g_o)]
             model = dataset.model(oid)
             err = np.array([[metrics.add_or_adds(e.R, e.t, g.R, g.t, model.points, model.symmetric) for g in g_o] for e in e_o]).reshape(len(e_o), len(g_o))
-            matched = np.full(len(g_o), np.nan)
-            match_est: list[int | None] = [None] * len(g_o)
-            for i in range(len(e_o)):
-                cand = [(err[i, j], j) for j in range(len(g_o)) if math.isnan(matched[j]) and err[i, j] < threshold * model.diameter]
-                if cand:
-                    e_min, j = min(cand)
-                    matched[j], match_est[j] = e_min, i
+            rel_err.append(err / model.diameter)
+            match_est = greedy_match(err, threshold * model.diameter)
             for j, g in enumerate(g_o):
-                ok = not math.isnan(matched[j])
+                ok = match_est[j] is not None
                 i = match_est[j] if ok else (int(np.argmin(err[:, j])) if len(e_o) else None)
-                best = matched[j] if ok else (float(err[i, j]) if i is not None else math.nan)
+                best = float(err[i, j]) if i is not None else math.nan
                 records.append(MatchRecord(key[0], key[1], oid, sample.instances.index(g), float(best), ok,
                                            None if i is None else e_o[i]))
                 if bop:
@@ -179,6 +202,9 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
                                                       and dataset.model(o).symmetries is None)
     n_gt = sum(n_gt_obj.values())
     n_ok = sum(n_ok_obj.values())
+    curve = {"threshold_pct": list(CURVE_THRESHOLDS_PCT),
+             "accuracy": [100.0 * sum(sum(m is not None for m in greedy_match(e, pct / 100.0)) for e in rel_err) / n_gt
+                          if n_gt else float("nan") for pct in CURVE_THRESHOLDS_PCT]}
     img_time = {k: max(e.time for e in v) for k, v in by_img.items()}
     total = float(sum(t for t in img_time.values() if t >= 0))
     n_est = sum(len(v) for v in by_img.values())
@@ -195,6 +221,7 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
         total_time=total,
         records=records,
         bop=bop_all,
+        curve=curve,
     )
 
 

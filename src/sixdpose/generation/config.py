@@ -213,11 +213,23 @@ YCBV_SYMMETRIC: tuple[str, ...] = tuple(bop_name(k) for k in (1, 13, 14, 16, 18,
 #: BOP models as targets (ground truth in their model frames and obj_ids), the other YCB objects as
 #: noise, the YCB-Video camera on a closer arc, ``kinect`` depth, a smaller table with fewer objects (the
 #: camera's narrow view sees a 0.4 x 0.3 m patch at 0.8 m), and a BOP copy in ``<out>/bop/train_synt``.
+#:
+#: Held-out splits of the ``make reproduce`` graph (never trained or tuned on): ``test_single`` (seed 400,
+#: 200 images) is the paper's single-instance subset of section V-D (``max_instances=1``: no object, target
+#: or noise, appears twice in a scene), the setting of the paper's Table III; ``demo_test`` /
+#: ``demo_single`` (2 images of 2 scenes) and ``smoke_test`` / ``smoke_single`` (1 image) are the same two
+#: kinds of split at the sizes of the ``demo`` and ``smoke`` graphs, with the smoke profile's 5-8 targets
+#: (pipeline checks: on a shared 2-core CPU a hybrid run costs seconds per instance with its start-up).
 PROFILES: dict[str, GenerationConfig] = {
     "smoke": GenerationConfig(scenes=2, views=3, targets=(5, 8), noise=(3, 5)),
+    "smoke_test": GenerationConfig(scenes=1, views=1, seed=300, targets=(5, 8), noise=(3, 5)),
+    "smoke_single": GenerationConfig(scenes=1, views=1, seed=400, targets=(5, 8), noise=(3, 5), max_instances=1),
     "demo": GenerationConfig(scenes=12, views=20),
+    "demo_test": GenerationConfig(scenes=2, views=1, seed=300, targets=(5, 8), noise=(3, 5)),
+    "demo_single": GenerationConfig(scenes=2, views=1, seed=400, targets=(5, 8), noise=(3, 5), max_instances=1),
     "val": GenerationConfig(scenes=6, views=20, seed=100),
     "test": GenerationConfig(scenes=10, views=20, seed=300),
+    "test_single": GenerationConfig(scenes=10, views=20, seed=400, max_instances=1),
     "train": GenerationConfig(scenes=60, views=20, seed=500),
     "paper": GenerationConfig(scenes=1250, views=20),
     "ycbv": GenerationConfig(scenes=60, views=20, seed=700, targets=(4, 12), noise=(2, 6), table_size=(0.9, 0.6),

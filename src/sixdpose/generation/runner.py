@@ -28,7 +28,7 @@ from .sensors import sensor_rng, simulate_depth
 from ..datasets.layout import model_file, write_models_info
 from ..datasets.ply import write_ply
 from ..errors import SixdposeError
-from ..fileio import atomic_write_text, claim_output_dir
+from ..fileio import atomic_write_text, claim_output_dir, write_if_changed
 from .writer import PARTIAL, RECORDS, commit_scene, finalize, read_records, scene_files, write_attribution
 
 CONFIG_FILE = "config.yml"
@@ -272,7 +272,7 @@ def generate(
         check_models(out, objects)
 
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / CONFIG_FILE, cfg.to_yaml())
+    write_if_changed(out / CONFIG_FILE, cfg.to_yaml())
     shutil.rmtree(out / PARTIAL, ignore_errors=True)
     (out / RECORDS).mkdir(exist_ok=True)
     if not (out / "models" / "models_info.yml").is_file():

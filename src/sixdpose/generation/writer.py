@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..constants import YCB_ATTRIBUTION
 from ..datasets.layout import image_files, write_gt, write_manifest
-from ..fileio import atomic_write_bytes, atomic_write_text
+from ..fileio import atomic_write_text, write_if_changed
 
 RECORDS = ".scenes"
 PARTIAL = ".partial"
@@ -70,10 +70,10 @@ def read_records(root: Path) -> dict[int, dict]:
 
 def write_attribution(root: Path, assets_dir: Path) -> None:
     """Write ``ATTRIBUTION.txt`` and copy the YCB licence text if the asset directory has one."""
-    atomic_write_text(root / "ATTRIBUTION.txt", YCB_ATTRIBUTION + "\n")
+    write_if_changed(root / "ATTRIBUTION.txt", YCB_ATTRIBUTION + "\n")
     lic = assets_dir / "LICENSE-CC-BY-4.0.txt"
     if lic.is_file():
-        atomic_write_bytes(root / "LICENSE-CC-BY-4.0.txt", lic.read_bytes())
+        write_if_changed(root / "LICENSE-CC-BY-4.0.txt", lic.read_bytes())
 
 
 def finalize(root: Path, records: dict[int, dict], manifest_head: dict) -> dict:

@@ -1,0 +1,67 @@
+# The profiles of the `make reproduce` graph (mk/reproduce.mk), in one table.
+#
+#   PROFILE=smoke  CI: the whole graph on a handful of images in a few minutes (numbers mean nothing)
+#   PROFILE=demo   `make demo`: the same graph at laptop scale (19 min on a shared 2-core CPU; pipeline checks)
+#   PROFILE=cpu    the committed results (results/cpu/): the train / val / test splits, the `cpu` profile
+#                  of every stage; several hours on a 2-core CPU
+#   PROFILE=paper  the paper's scale on a GPU machine: 25,000 training images, the `paper` profile of
+#                  every stage (section III-C, IV-A, IV-C); the default of `make reproduce`
+#
+# Datasets live in data/<generator profile> (so the cpu and paper graphs share data/val, data/test and
+# data/test_single); runs in runs/$(PROFILE)/, result artifacts in results/$(PROFILE)/, figures in
+# figures/$(PROFILE)/, executed notebooks in notebooks/executed/$(PROFILE)/, the write-up's generated
+# LaTeX in paper/generated/$(PROFILE)/.
+#
+# Columns (one word per profile, in the order of PROFILES):
+#   TRAIN_GEN   generator profile of the training data (data/<it>): segmentation, pose, refiner
+#   TEST_GEN    generator profile of the multi-instance held-out split (repeated objects, as generated)
+#   SINGLE_GEN  generator profile of the single-instance held-out split (paper section V-D, Table III)
+#   VAL_GEN     generator profile of the validation split scored every epoch by train-pose (- : none)
+#   SEG         `sixdpose train-seg --profile`
+#   POSE        `sixdpose train-pose --profile` and `train-refiner --profile`
+#   METHODS     the pose methods run on every split and mask source: all (mk/reproduce.mk's METHODS) or
+#               few (FEW_METHODS: one per kind of row, to keep CI short)
+#   LIMIT       images per pose method and split (register / predict-pose / evaluate --limit; 0: all)
+#   NB04        images per method in notebook 04's own comparison (an illustration; the tables of
+#               record come from the graph's results)
+
+PROFILES   := smoke        demo         cpu          paper
+TRAIN_GEN  := smoke        demo         train        paper
+TEST_GEN   := smoke_test   demo_test    test         test
+SINGLE_GEN := smoke_single demo_single  test_single  test_single
+VAL_GEN    := -            -            val          val
+SEG        := smoke        smoke        cpu          paper
+POSE       := smoke        smoke        cpu          paper
+METHODS    := few          all          all          all
+LIMIT      := 0            0            0            0
+NB04       := 2            2            20           100
+
+# ---- the column of $(PROFILE) ----
+_IDX := $(strip $(foreach i,1 2 3 4 5 6 7 8,$(if $(filter $(PROFILE),$(word $(i),$(PROFILES))),$(i))))
+ifeq ($(_IDX),)
+$(error PROFILE=$(PROFILE): use one of $(strip $(PROFILES)))
+endif
+_col = $(word $(_IDX),$($(1)))
+
+P_TRAIN_GEN  := $(call _col,TRAIN_GEN)
+P_TEST_GEN   := $(call _col,TEST_GEN)
+P_SINGLE_GEN := $(call _col,SINGLE_GEN)
+P_VAL_GEN    := $(filter-out -,$(call _col,VAL_GEN))
+P_SEG        := $(call _col,SEG)
+P_POSE       := $(call _col,POSE)
+P_METHODS    := $(call _col,METHODS)
+P_LIMIT      := $(call _col,LIMIT)
+P_NB04       := $(call _col,NB04)
+
+# ---- paths of $(PROFILE) ----
+TRAIN_DIR  := data/$(P_TRAIN_GEN)
+DATA_test  := data/$(P_TEST_GEN)
+DATA_single := data/$(P_SINGLE_GEN)
+VAL_DIR    := $(if $(P_VAL_GEN),data/$(P_VAL_GEN))
+RUNS       := runs/$(PROFILE)
+POSES      := $(RUNS)/poses
+RES        := results/$(PROFILE)
+FIG        := figures/$(PROFILE)
+EXEC       := notebooks/executed/$(PROFILE)
+GEN        := paper/generated/$(PROFILE)
+PDF_DIR    := paper/build/$(PROFILE)

@@ -1,0 +1,183 @@
+# `make reproduce`: the paper's tables, figures and write-up as a dependency graph of files.
+#
+#   data/<gen>/manifest.json                 sixdpose generate   (training data, test, single-instance test, val)
+#   runs/P/seg/model.pt                      sixdpose train-seg
+#   runs/P/masks/<split>/meta.json           sixdpose segment    (predicted masks of a held-out split)
+#   runs/P/pose/model.pt, refiner/model.pt   sixdpose train-pose, train-refiner
+#   runs/P/poses/<split>_<masks>_<method>.csv  sixdpose register (hybrid) / predict-pose (learned)
+#   results/P/<split>_<masks>_<method>.json  sixdpose evaluate --result-name (+ .csv; commit, date, hardware)
+#   notebooks/executed/P/NN_*.ipynb          papermill, on top of those files (figures/P/...)
+#   paper/generated/P/*.tex                  notebook 07: Tables I-III, per-object tables, macros
+#   paper/build/P/paper.pdf (+ paper/paper.pdf)  latexmk
+#
+# P is $(PROFILE) (mk/profiles.mk). <split>: test (multi-instance) or single (no repeated object, the
+# paper's Table III subset); <masks>: gt or pred (Mask R-CNN of runs/P/seg); <method>: $(METHODS).
+# Each target is a file written atomically by the command that makes it, so an interrupted run resumes
+# where it stopped (training resumes from last.pt) and `make -n reproduce` prints the plan.
+# LMO=/path/to/lmo (a full BOP LM-O with depth) adds the LM-O rows of Table I.
+
+SIXDPOSE := $(VENV)/bin/sixdpose
+VENV_OK := $(VENV)/.synced $(APT_STAMP)
+LMO ?=
+LMO_SPLIT ?= test
+LMO_TRAIN_SPLIT ?= train_pbr
+
+ALL_HYBRID  := ransac ransac_icp fgr fgr_icp super4pcs super4pcs_icp
+ALL_LEARNED := learned_it0 learned_it2 learned_it2_icp learned_it2_colour
+FEW_METHODS := ransac_icp super4pcs learned_it0 learned_it2
+HYBRID  := $(if $(filter few,$(P_METHODS)),$(filter $(FEW_METHODS),$(ALL_HYBRID)),$(ALL_HYBRID))
+LEARNED := $(if $(filter few,$(P_METHODS)),$(filter $(FEW_METHODS),$(ALL_LEARNED)),$(ALL_LEARNED))
+METHODS := $(HYBRID) $(LEARNED)
+SPLITS  := test single
+MASKS   := gt pred
+
+_limit = $(if $(filter-out 0,$(P_LIMIT)),--limit $(P_LIMIT))
+
+# ---- datasets ----------------------------------------------------------------------------------
+# one rule per generator profile the graph uses (a dataset is complete when manifest.json is written;
+# generate resumes an interrupted dataset and leaves a complete one untouched)
+DATASETS := $(sort $(P_TRAIN_GEN) $(P_TEST_GEN) $(P_SINGLE_GEN) $(P_VAL_GEN))
+$(foreach g,$(DATASETS),$(eval data/$(g)/manifest.json: | $(VENV_OK) ; \
+	$(SIXDPOSE) generate --profile $(g) --out data/$(g) --workers $(WORKERS) --no-progress))
+
+# ---- segmentation ------------------------------------------------------------------------------
+# train-seg writes model.pt last; an interrupted run (last.pt only) is resumed
+$(RUNS)/seg/model.pt: $(TRAIN_DIR)/manifest.json | $(VENV_OK)
+	$(SIXDPOSE) train-seg --data $(TRAIN_DIR) --out $(@D) --no-progress \
+	  $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_SEG))
+
+$(RUNS)/masks/%/meta.json: $(RUNS)/seg/model.pt | $(VENV_OK)
+	$(SIXDPOSE) segment --data $(DATA_$*) --ckpt $(RUNS)/seg --out $(@D) --no-progress
+
+$(RUNS)/masks/test/meta.json: $(DATA_test)/manifest.json
+$(RUNS)/masks/single/meta.json: $(DATA_single)/manifest.json
+
+# ---- learned pose ------------------------------------------------------------------------------
+_val = $(if $(VAL_DIR),--val $(VAL_DIR))
+$(RUNS)/pose/model.pt: $(TRAIN_DIR)/manifest.json $(if $(VAL_DIR),$(VAL_DIR)/manifest.json) | $(VENV_OK)
+	$(SIXDPOSE) train-pose --data $(TRAIN_DIR) --out $(@D) $(_val) --no-progress \
+	  $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_POSE))
+
+$(RUNS)/refiner/model.pt: $(RUNS)/pose/model.pt $(TRAIN_DIR)/manifest.json $(if $(VAL_DIR),$(VAL_DIR)/manifest.json) | $(VENV_OK)
+	$(SIXDPOSE) train-refiner --pose $(RUNS)/pose --data $(TRAIN_DIR) --out $(@D) $(_val) --no-progress \
+	  $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_POSE))
+
+# ---- pose estimates: one results CSV per split x masks x method --------------------------------
+CMD_ransac         := register --method ransac
+CMD_ransac_icp     := register --method ransac --icp
+CMD_fgr            := register --method fgr
+CMD_fgr_icp        := register --method fgr --icp
+CMD_super4pcs      := register --method super4pcs
+CMD_super4pcs_icp  := register --method super4pcs --icp
+CMD_learned_it0    := predict-pose --pose $(RUNS)/pose --iterations 0
+CMD_learned_it2    := predict-pose --pose $(RUNS)/pose --refiner $(RUNS)/refiner --iterations 2
+CMD_learned_it2_icp    := $(CMD_learned_it2) --icp
+CMD_learned_it2_colour := $(CMD_learned_it2) --colour-verify
+NEEDS_learned_it0  := $(RUNS)/pose/model.pt
+$(foreach m,learned_it2 learned_it2_icp learned_it2_colour,$(eval NEEDS_$(m) := $(RUNS)/pose/model.pt $(RUNS)/refiner/model.pt))
+# mask arguments: GT masks count instances with >= 400 visible px (as evaluate does); predicted masks
+# keep detections scoring >= 0.5
+ARGS_register_gt     := --masks gt --min-px 400 --workers $(WORKERS)
+ARGS_register_pred   = --masks $(RUNS)/masks/$(1) --min-score 0.5 --workers $(WORKERS)
+ARGS_predict-pose_gt := --masks gt
+ARGS_predict-pose_pred = --masks $(RUNS)/masks/$(1) --score-thresh 0.5
+
+# $(call pose_rule,split,masks,method)
+define pose_rule
+$(POSES)/$(1)_$(2)_$(3).csv: $(DATA_$(1))/manifest.json $(NEEDS_$(3)) $(if $(filter pred,$(2)),$(RUNS)/masks/$(1)/meta.json) | $(VENV_OK)
+	$(SIXDPOSE) $(CMD_$(3)) --data $(DATA_$(1)) $(if $(filter pred,$(2)),$(call ARGS_$(firstword $(CMD_$(3)))_pred,$(1)),$(ARGS_$(firstword $(CMD_$(3)))_gt)) $(_limit) --no-progress --out $$@
+
+$(RES)/$(1)_$(2)_$(3).json: $(POSES)/$(1)_$(2)_$(3).csv $(DATA_$(1))/manifest.json | $(VENV_OK)
+	$(SIXDPOSE) evaluate --data $(DATA_$(1)) --results $$< --no-bop --no-progress --all-images $(_limit) --label $(1)_$(2)_$(3) \
+	  --result-name $(1)_$(2)_$(3) --results-dir $(RES)
+endef
+$(foreach s,$(SPLITS),$(foreach k,$(MASKS),$(foreach m,$(METHODS),$(eval $(call pose_rule,$(s),$(k),$(m))))))
+
+# the stages in the order of the plan (`make -n reproduce` lists them so)
+STAGES := $(foreach g,$(DATASETS),data/$(g)/manifest.json) $(RUNS)/seg/model.pt $(RUNS)/pose/model.pt \
+	$(RUNS)/refiner/model.pt $(RUNS)/masks/test/meta.json $(RUNS)/masks/single/meta.json
+RESULTS := $(foreach s,$(SPLITS),$(foreach k,$(MASKS),$(foreach m,$(METHODS),$(RES)/$(s)_$(k)_$(m).json)))
+
+# ---- LM-O (Table I): only with LMO=/path/to/lmo (a full BOP LM-O with depth and masks) ----------
+ifneq ($(strip $(LMO)),)
+DATA_lmo := $(LMO)
+$(RUNS)/lmo_seg/model.pt: | $(VENV_OK)
+	$(SIXDPOSE) train-seg --data $(LMO) --train-split $(LMO_TRAIN_SPLIT) --test-split $(LMO_SPLIT) --out $(@D) \
+	  --no-progress $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_SEG))
+$(RUNS)/masks/lmo/meta.json: $(RUNS)/lmo_seg/model.pt
+	$(SIXDPOSE) segment --data $(LMO) --split $(LMO_SPLIT) --ckpt $(RUNS)/lmo_seg --out $(@D) --no-progress
+
+define lmo_rule
+$(POSES)/lmo_$(1)_$(2).csv: $(if $(filter pred,$(1)),$(RUNS)/masks/lmo/meta.json) | $(VENV_OK)
+	$(SIXDPOSE) $(CMD_$(2)) --data $(LMO) --split $(LMO_SPLIT) $(if $(filter pred,$(1)),$(call ARGS_register_pred,lmo),$(ARGS_register_gt)) $(_limit) --no-progress --out $$@
+
+$(RES)/lmo_$(1)_$(2).json: $(POSES)/lmo_$(1)_$(2).csv | $(VENV_OK)
+	$(SIXDPOSE) evaluate --data $(LMO) --split $(LMO_SPLIT) --results $$< --no-progress --all-images $(_limit) --label lmo_$(1)_$(2) \
+	  --result-name lmo_$(1)_$(2) --results-dir $(RES)
+endef
+$(foreach k,$(MASKS),$(foreach m,$(HYBRID),$(eval $(call lmo_rule,$(k),$(m)))))
+RESULTS += $(foreach k,$(MASKS),$(foreach m,$(HYBRID),$(RES)/lmo_$(k)_$(m).json))
+endif
+
+# ---- notebooks, executed on top of those files -----------------------------------------------
+# papermill writes the executed copy beside its target and moves it into place when every cell ran,
+# so a failed notebook leaves no target behind
+define papermill
+	@mkdir -p $(@D) $(FIG)
+	$(PAPERMILL) $(1) $(EXEC)/.$(notdir $(1)).tmp.ipynb $(2) && mv $(EXEC)/.$(notdir $(1)).tmp.ipynb $(EXEC)/$(notdir $(1))
+endef
+NB_FIG := -p FIGURES ../$(FIG)
+
+$(EXEC)/01_generate_dataset.ipynb: notebooks/01_generate_dataset.ipynb $(TRAIN_DIR)/manifest.json | $(VENV_OK)
+	$(call papermill,$<,-p PROFILE $(P_TRAIN_GEN) -p DATA ../$(TRAIN_DIR) $(NB_FIG) -p WORKERS $(WORKERS))
+
+$(EXEC)/02_dataset_overview.ipynb: notebooks/02_dataset_overview.ipynb $(TRAIN_DIR)/manifest.json | $(VENV_OK)
+	$(call papermill,$<,-p PROFILE $(P_TRAIN_GEN) -p DATA ../$(TRAIN_DIR) $(NB_FIG))
+
+$(EXEC)/03_train_segmentation.ipynb: notebooks/03_train_segmentation.ipynb $(RUNS)/seg/model.pt | $(VENV_OK)
+	$(call papermill,$<,-p PROFILE $(PROFILE) -p DATA ../$(TRAIN_DIR) -p RUN_DIR ../$(RUNS)/seg -p SEG_PROFILE $(P_SEG) $(NB_FIG))
+
+# notebook 04 compares the hybrid methods itself on a few training-data images (the masks notebook 03
+# predicted on its held-out images); Tables II and III come from the graph's results (notebook 07)
+$(EXEC)/04_hybrid_registration.ipynb: notebooks/04_hybrid_registration.ipynb $(EXEC)/03_train_segmentation.ipynb | $(VENV_OK)
+	$(call papermill,$<,-p PROFILE $(P_TRAIN_GEN) -p DATA ../$(TRAIN_DIR) -p PRED_DIR ../$(RUNS)/seg/pred_test \
+	  -p MAX_IMAGES $(P_NB04) -p WORKERS $(WORKERS) $(NB_FIG))
+
+$(EXEC)/05_train_pose_network.ipynb: notebooks/05_train_pose_network.ipynb $(RUNS)/pose/model.pt $(DATA_test)/manifest.json | $(VENV_OK)
+	$(call papermill,$<,-p PROFILE $(PROFILE) -p DATA ../$(TRAIN_DIR) -p TEST_DATA ../$(DATA_test) -p RUN_DIR ../$(RUNS)/pose \
+	  -p POSE_PROFILE $(P_POSE) -p RESULTS ../$(RES) $(NB_FIG))
+
+$(EXEC)/06_train_refiner.ipynb: notebooks/06_train_refiner.ipynb $(RUNS)/refiner/model.pt $(DATA_test)/manifest.json | $(VENV_OK)
+	$(call papermill,$<,-p PROFILE $(PROFILE) -p DATA ../$(TRAIN_DIR) -p TEST_DATA ../$(DATA_test) -p POSE_RUN ../$(RUNS)/pose \
+	  -p RUN_DIR ../$(RUNS)/refiner -p REFINER_PROFILE $(P_POSE) $(NB_FIG))
+
+$(EXEC)/08_real_data.ipynb: notebooks/08_real_data.ipynb $(TRAIN_DIR)/manifest.json $(DATA_test)/manifest.json | $(VENV_OK)
+	$(call papermill,$<,-p PROFILE $(PROFILE) -p WORKERS $(WORKERS) $(NB_FIG))
+
+# notebook 07 reads results/P/ only (and, for Fig. 7, the results CSV and dataset a result names)
+TEX_OUT := $(addprefix $(GEN)/,macros.tex table1.tex table2.tex table3.tex table_dataset.tex \
+	$(foreach s,$(SPLITS),$(foreach k,$(MASKS),per_object_$(s)_$(k).tex)))
+FIG_OUT := $(addprefix $(FIG)/,fig7.png accuracy_threshold.png table1.csv table2.csv table3.csv)
+$(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT) &: notebooks/07_evaluation.ipynb $(RESULTS) $(EXEC)/02_dataset_overview.ipynb \
+	| $(VENV_OK)
+	$(call papermill,$<,-p PROFILE $(PROFILE) -p RESULTS ../$(RES) -p TEX ../$(GEN) -p TRAIN_DATA ../$(TRAIN_DIR) $(NB_FIG))
+
+NOTEBOOKS := $(addprefix $(EXEC)/,01_generate_dataset.ipynb 02_dataset_overview.ipynb 03_train_segmentation.ipynb \
+	04_hybrid_registration.ipynb 05_train_pose_network.ipynb 06_train_refiner.ipynb 07_evaluation.ipynb 08_real_data.ipynb)
+
+# ---- the write-up ----------------------------------------------------------------------------
+# paper/build/P/paper.pdf per profile; paper/paper.pdf is a copy of the last one built
+PAPER_SRC := $(wildcard paper/*.tex paper/*.bib)
+LATEXMK := latexmk
+# LaTeX is there, or WITH_LATEX=1 installs it before any target runs (order-only $(APT_STAMP))
+HAVE_LATEX := $(if $(WITH_LATEX),yes,$(shell command -v $(LATEXMK) >/dev/null 2>&1 && command -v pdflatex >/dev/null 2>&1 && echo yes))
+$(PDF_DIR)/paper.pdf paper/paper.pdf &: $(PAPER_SRC) $(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT) $(EXEC)/02_dataset_overview.ipynb \
+	| $(VENV_OK)
+	@mkdir -p $(PDF_DIR)
+	cd paper && TEXINPUTS=generated/$(PROFILE)//:../$(FIG)//: $(LATEXMK) -pdf -interaction=nonstopmode -halt-on-error \
+	  -quiet -outdir=build/$(PROFILE) paper.tex >build/$(PROFILE)/latexmk.log 2>&1 \
+	  || { tail -40 build/$(PROFILE)/latexmk.log; exit 1; }
+	@touch $(PDF_DIR)/paper.pdf  # latexmk leaves the PDF alone when its inputs' contents did not change
+	cp $(PDF_DIR)/paper.pdf paper/.paper.pdf.tmp && mv paper/.paper.pdf.tmp paper/paper.pdf
+
+PDF := $(if $(HAVE_LATEX),$(PDF_DIR)/paper.pdf)

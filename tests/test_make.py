@@ -1,0 +1,66 @@
+"""The graph of ``make reproduce`` (mk/profiles.mk, mk/reproduce.mk): the plan each profile prints with
+``make -n`` (nothing runs), and the profile checks."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.skipif(shutil.which("make") is None, reason="GNU make not installed")
+
+
+def _plan(*args: str) -> subprocess.CompletedProcess:
+    # -B: every target out of date, so the plan is the whole graph whatever this checkout holds
+    return subprocess.run(["make", "-nB", "--no-print-directory", *args], cwd=REPO, capture_output=True, text=True, timeout=120)
+
+
+def _lines(out: str, cmd: str) -> list[str]:
+    return [line for line in out.splitlines() if line.startswith(f".venv/bin/sixdpose {cmd} ")]
+
+
+@pytest.mark.parametrize("profile, train, seg, splits", [
+    ("paper", "data/paper", "paper", ("data/test", "data/test_single")),
+    ("cpu", "data/train", "cpu", ("data/test", "data/test_single")),
+    ("demo", "data/demo", "smoke", ("data/demo_test", "data/demo_single")),
+])
+def test_the_plan_of_each_profile(profile, train, seg, splits):
+    p = _plan("reproduce", f"PROFILE={profile}", "WITH_LATEX=1")
+    assert p.returncode == 0, p.stderr
+    out = p.stdout
+    gen = {re.search(r"--out (\S+)", line).group(1) for line in _lines(out, "generate")}
+    assert gen >= {train, *splits}
+    assert (f"data/val" in gen) == (profile in ("cpu", "paper"))
+    seg_line = next(line for line in _lines(out, "train-seg") if f"--out runs/{profile}/seg" in line)
+    # a new run gets the profile; an interrupted one (last.pt in this checkout) is resumed
+    assert out.split(seg_line, 1)[1].lstrip().startswith((f"--profile {seg}", "--resume")) or "--resume" in seg_line
+    assert len(_lines(out, "segment")) == 2
+    poses = _lines(out, "register") + _lines(out, "predict-pose")
+    assert len(poses) == 40 and len(_lines(out, "evaluate")) == 40  # 10 methods x 2 splits x 2 mask sources
+    assert all(f"--results-dir results/{profile}" in line for line in _lines(out, "evaluate"))
+    assert sum("--masks gt --min-px 400" in line for line in poses) == 12
+    assert len(re.findall(r"-m papermill .*notebooks/0\d_\w+\.ipynb notebooks/executed/" + profile, out)) == 8
+    assert "latexmk" in out and f"-outdir=build/{profile}" in out
+    # stages in the order of the pipeline: datasets, training, masks, then poses
+    first = [out.index(s) for s in ("sixdpose generate", "sixdpose train-seg", "sixdpose segment", "sixdpose register")]
+    assert first == sorted(first)
+
+
+def test_smoke_runs_a_few_methods_and_lmo_adds_table_1():
+    out = _plan("smoke", "WITH_LATEX=1").stdout
+    assert len(_lines(out, "evaluate")) == 16 and "results/smoke/single_pred_super4pcs.json" not in out
+    out = _plan("reproduce", "PROFILE=cpu", "LMO=/data/lmo").stdout
+    lmo = [line for line in _lines(out, "evaluate") if "--data /data/lmo" in line]
+    assert len(lmo) == 12 and all("--split test" in line for line in lmo)
+    assert any("--train-split train_pbr" in line for line in _lines(out, "train-seg"))
+
+
+def test_profile_errors_are_one_line():
+    p = _plan("reproduce", "PROFILE=laptop")
+    assert p.returncode != 0 and "PROFILE=laptop: use one of smoke demo cpu paper" in p.stderr
+    p = _plan("demo", "PROFILE=cpu")
+    assert p.returncode != 0 and "make demo is PROFILE=demo" in p.stderr

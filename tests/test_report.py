@@ -1,0 +1,214 @@
+"""The report of notebook 07 (``sixdpose.evaluation.report``): tables I-III, per-object tables, the
+accuracy curve, Fig. 7 and the write-up's macros, built from result files only; and ``evaluate``'s curve
+and ``--limit``."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+
+import numpy as np
+import pytest
+
+from sixdpose.artifacts.results import write_result
+from sixdpose.evaluation import report
+from sixdpose.paper import TABLES
+
+
+def _res(d, name, acc, *, fps=2.0, curve=True, rows=None, cpu="Test CPU", config=None):
+    thr = [0.5 * i for i in range(41)]
+    figures = {"accuracy": acc, "mean_object_accuracy": acc - 1, "n_gt": 100, "n_correct": round(acc), "fps": fps,
+               "instances_per_s": 4 * fps, "n_images": 10, "n_estimates": 40}
+    if curve:
+        figures["curve"] = {"threshold_pct": thr, "accuracy": [min(100.0, acc * t / 10) for t in thr]}
+    rows = rows or [{"obj_id": 1, "name": "055_baseball", "n_gt": 50, "n_correct": 25, "add_s_accuracy": acc - 5},
+                    {"obj_id": 2, "name": "056_tennis_ball", "n_gt": 50, "n_correct": 25, "add_s_accuracy": acc + 5},
+                    {"obj_id": "all", "name": "mean over instances", "n_gt": 100, "n_correct": 50, "add_s_accuracy": acc},
+                    {"obj_id": "objects", "name": "mean over objects", "n_gt": "", "n_correct": "", "add_s_accuracy": acc}]
+    p = write_result(name, figures, rows=rows, results_dir=d, command=["sixdpose", "evaluate"], config=config)
+    doc = json.loads(p.read_text())  # a machine of our choosing, so the letters are predictable
+    doc["provenance"]["hardware"] = {"cpu": cpu, "cpu_count": 2, "cpus_available": 2, "ram_gib": 8.0, "gpus": []}
+    p.write_text(json.dumps(doc))
+    return p
+
+
+@pytest.fixture
+def results(tmp_path):
+    d = tmp_path / "results"
+    _res(d, "single_pred_super4pcs", 60.0)
+    _res(d, "single_pred_ransac_icp", 50.0, cpu="Other CPU")
+    _res(d, "single_pred_learned_it2", 30.0, curve=False)
+    _res(d, "single_gt_super4pcs", 80.0)
+    _res(d, "test_gt_super4pcs", 70.0)
+    _res(d, "test_gt_ransac", 40.0)
+    _res(d, "test_gt_ransac_icp", 55.0)
+    _res(d, "test_gt_learned_it0", 20.0)
+    _res(d, "test_gt_learned_it2", 25.0)
+    write_result("pose_ablation_cpu", [{"variant": "paper", "val_add": 3.0}], results_dir=d)  # not a graph result
+    return d
+
+
+def test_names_and_entries(results):
+    assert report.parse_name("single_pred_super4pcs") == ("single", "pred", "super4pcs")
+    assert report.parse_name("lmo_gt_ransac_icp") == ("lmo", "gt", "ransac_icp")
+    for bad in ("pose_ablation_cpu", "test_kinect_gt_ransac_icp", "test_gt_nomethod", "ycbv_gt_ransac_icp"):
+        assert report.parse_name(bad) is None
+    e = report.load_entries(results)
+    assert len(e) == 9 and ("single", "pred", "super4pcs") in e
+    assert e[("single", "pred", "learned_it2")].curve is None and e[("test", "gt", "ransac")].curve[0][-1] == 20.0
+
+
+def test_table3_has_the_papers_column_beside_the_like_for_like_one(results, tmp_path):
+    e = report.load_entries(results)
+    rows = report.write_table3(e, tmp_path / "t3.csv", tmp_path / "t3.tex")
+    s4 = next(r for r in rows if r["method"] == "Super4PCS")
+    assert s4["paper"] == TABLES["III"].rows["Ours Hybrid(Super4PCS)"] and s4["single_pred"] == 60.0
+    assert s4["single_gt"] == 80.0 and s4["test_gt"] == 70.0 and s4["test_pred"] is None
+    assert next(r for r in rows if r["method"] == "Super4PCS + ICP")["paper"] is None  # the paper has no such row
+    tex = (tmp_path / "t3.tex").read_text()
+    assert "single-instance subset" in tex and "Table III" in tex and "\\cmidrule" in tex
+    assert "Super4PCS & 57.32 & 60.00 & 80.00 & -- & 70.00" in tex
+    csv = (tmp_path / "t3.csv").read_text().splitlines()
+    assert csv[0] == "method,paper,single_pred,single_gt,test_pred,test_gt" and "Super4PCS,57.3200,60.0000,80.0000,,70.0000" in csv
+
+
+def test_table1_without_and_with_lmo(results, tmp_path):
+    rows = report.table1(report.load_entries(results))
+    assert [r["method"] for r in rows][:2] == ["PoseCNN", "PoseCNN+ICP"] and all(r["lmo_gt"] is None for r in rows)
+    _res(results, "lmo_gt_ransac_icp", 33.0)
+    _res(results, "lmo_gt_super4pcs_icp", 44.0)
+    e = report.load_entries(results)
+    rows = report.write_table1(e, tmp_path / "t1.csv", tmp_path / "t1.tex")
+    r = next(r for r in rows if r["method"] == "RANSAC + ICP")
+    assert r["paper"] == 9.38 and r["lmo_gt"] == 33.0 and r["lmo_pred"] is None
+    assert rows[-1]["method"] == "Super4PCS + ICP" and rows[-1]["paper"] is None and rows[-1]["lmo_gt"] == 44.0
+    assert "\\iflmo\\lmotrue" in report.macros(e, "cpu")
+
+
+def test_table2_records_the_machine(results, tmp_path):
+    e = report.load_entries(results)
+    letters = report.machines(e)
+    assert set(letters) == {"Test CPU (2 CPUs, 8 GiB), no GPU", "Other CPU (2 CPUs, 8 GiB), no GPU"}
+    rows = report.write_table2(e, tmp_path / "t2.csv", tmp_path / "t2.tex")
+    r = next(r for r in rows if r["method"] == "RANSAC + ICP")
+    assert r["paper"] == 0.88 and r["fps_gt"] == 2.0 and r["ips_gt"] == 8.0 and r["fps_pred"] is None
+    assert r["machine"] == letters["Test CPU (2 CPUs, 8 GiB), no GPU"]
+    tex = (tmp_path / "t2.tex").read_text()
+    assert "% machine a: Test CPU" in tex and "% machine b: Other CPU" in tex
+
+
+def test_per_object(results, tmp_path):
+    e = report.load_entries(results)
+    rows = report.write_per_object(e, "test", "gt", tmp_path / "po.csv", tmp_path / "po.tex")
+    assert [r["obj_id"] for r in rows] == [1, 2, "all", "objects"]
+    assert rows[0]["ransac"] == 35.0 and rows[1]["super4pcs"] == 75.0 and rows[0]["fgr"] is None
+    head = (tmp_path / "po.csv").read_text().splitlines()[0]
+    assert head == "obj_id,name,n_gt,ransac,ransac_icp,super4pcs,learned_it0,learned_it2"  # methods that ran only
+    report.write_per_object(e, "single", "gt", tmp_path / "e.csv", tmp_path / "e.tex")
+    assert report.write_per_object(e, "lmo", "pred", tmp_path / "n.csv", tmp_path / "n.tex") == []
+    assert "no results for lmo / pred" in (tmp_path / "n.tex").read_text()
+
+
+def test_macros_hold_every_number_and_findings(results):
+    e = report.load_entries(results)
+    text = report.macros(e, "demo", extra={"images@train": "240"})
+    assert "\\smallprofiletrue" in text and "\\lmofalse" in text and "\\newcommand{\\profile}{demo}" in text
+    assert "\\csname sdp@res@single_pred_super4pcs@acc\\endcsname{60.00}" in text
+    assert "\\csname sdp@res@single_pred_super4pcs@ngt\\endcsname{100}" in text
+    assert "\\csname sdp@paper@III@super4pcs\\endcsname{57.32}" in text
+    assert "\\csname sdp@paper@II@learned_it2\\endcsname{14.97}" in text
+    assert "\\csname sdp@best@single@pred@hybrid\\endcsname{Super4PCS}" in text
+    assert "\\csname sdp@val@images@train\\endcsname{240}" in text
+    f = report.findings(e)
+    assert f["finding@setting"].startswith("the best hybrid method (Super4PCS, 60.00 %) is 30.00 points higher than the best learned one")
+    assert "(57.32 against 26.87 %)" in f["finding@setting"]
+    assert f["finding@repeated"].startswith("ADD(-S) accuracy on the single-instance subset is 10.00 points higher than") \
+        and f["finding@repeated"].endswith("(GT masks)")
+    assert "15.00 points higher than" in f["finding@icp"] and "5.00 points higher than" in f["finding@refine"]
+    assert f["finding@colour"].startswith("n/a") and f["finding@masks"].startswith("ADD(-S) accuracy with predicted masks is 20.00 points lower")
+    assert f["finding@threshold"].startswith("Super4PCS goes from 30.00 % at 5 % of the diameter to 100.00 % at 20 %")
+    _res(results, "single_pred_fgr", 60.0)
+    _res(results, "single_pred_fgr_icp", 60.0)
+    tied = report.load_entries(results)
+    assert "\\csname sdp@best@single@pred@hybrid\\endcsname{FGR, FGR + ICP and 1 more (tied)}" in report.macros(tied, "cpu")
+    assert "\\smallprofilefalse" in report.macros(e, "cpu")
+    assert "\\lmofalse" in report.macros({}, "paper")  # no results at all still gives a usable file
+
+
+def test_curves_fig7_and_dataset_table(results, tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    e = report.load_entries(results)
+    fig = report.plot_curves(e)
+    assert len(fig.axes) == 4
+    texts = [t.get_text() for ax in fig.axes for t in ax.texts]
+    assert any("no curve recorded: learned + 2 refinement it." in t for t in texts)
+    fig, why = report.draw_fig7(e, "test_gt_learned_it2", tmp_path)
+    assert "config names no dataset" in why and fig is not None
+    fig, why = report.draw_fig7(e, "single_gt_learned_it0", tmp_path)
+    assert why == "no result single_gt_learned_it0 among the evaluations"
+    stats = tmp_path / "dataset_statistics.csv"
+    stats.write_text("quantity,paper,this dataset\nimages,\"25,000\",240\ntargets per scene,5-20,5-20 (mean 12.1)\n")
+    report.dataset_table(stats, tmp_path / "ds.tex")
+    tex = (tmp_path / "ds.tex").read_text()
+    assert "images & 25,000 & 240 \\\\" in tex and "p{0.34\\linewidth}" in tex
+    with pytest.raises(report.ReportError, match=r"missing\.csv: cannot read the dataset statistics"):
+        report.dataset_table(tmp_path / "missing.csv", tmp_path / "x.tex")
+    vals = report.dataset_values(e, tmp_path, None)
+    assert vals == {"images@test": "n/a", "seed@test": "n/a", "images@single": "n/a", "seed@single": "n/a", "images@train": "n/a"}
+
+
+# --------------------------------------------------------------------------------------------
+# evaluate: the accuracy curve, --limit, and Fig. 7 from a real results CSV
+# --------------------------------------------------------------------------------------------
+def test_evaluate_curve_limit_and_fig7(tmp_path, capsys):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from sixdpose.artifacts.poses import PoseEstimate, write_results
+    from sixdpose.cli import main
+    from sixdpose.datasets import open_dataset
+    from sixdpose.evaluation.evaluate import CURVE_THRESHOLDS_PCT, evaluate
+    from test_reg_helpers import write_synthetic_dataset
+
+    syn = write_synthetic_dataset(tmp_path / "syn", n_images=3)
+    ds = open_dataset(syn)
+    diam = ds.model(15).diameter
+    rows = []
+    for k, s in enumerate(ds[i] for i in range(3)):
+        for j, g in enumerate(s.instances):
+            off = diam * (0.03 if (k, j) == (0, 0) else 0.15 if k == 1 else 0.0)  # one at 3 %, one at 15 %
+            rows.append(PoseEstimate(s.scene_id, s.im_id, g.obj_id, 1.0, g.R, g.t + np.array([off, 0, 0]), 0.5))
+    res = evaluate(ds, rows, min_px=0)
+    acc = dict(zip(res.curve["threshold_pct"], res.curve["accuracy"]))
+    assert res.curve["threshold_pct"] == list(CURVE_THRESHOLDS_PCT)
+    assert acc[10.0] == pytest.approx(res.accuracy) and res.accuracy == pytest.approx(75.0)  # 3 of 4 instances
+    assert acc[0.0] == 0.0 and acc[2.5] == pytest.approx(50.0) and acc[5.0] == pytest.approx(75.0) and acc[20.0] == 100.0
+    write_results(rows, tmp_path / "r.csv")
+    base = ["evaluate", "--data", str(syn), "--results", str(tmp_path / "r.csv"), "--min-px", "0", "--no-bop",
+            "--results-dir", str(tmp_path / "results")]
+    assert main(base + ["--limit", "1", "--result-name", "test_gt_learned_it2", "--out", str(tmp_path / "ev1")]) == 0
+    e = report.load_entries(tmp_path / "results")[("test", "gt", "learned_it2")]
+    assert e.figure("n_gt") == 2 and e.result.config["limit"] == 1 and e.curve[1][-1] == 100.0
+    assert main(base + ["--limit", "-1", "--out", str(tmp_path / "ev2")]) == 2
+    assert "--limit: expected N >= 0" in capsys.readouterr().err
+    fig, why = report.fig7(e, root="/")
+    assert why is None and fig is not None and math.isfinite(e.figure("accuracy"))
+
+
+# --------------------------------------------------------------------------------------------
+# the generator leaves a complete dataset untouched (make sees nothing new)
+# --------------------------------------------------------------------------------------------
+def test_write_if_changed(tmp_path):
+    import os
+
+    from sixdpose.fileio import write_if_changed
+
+    p = tmp_path / "m.json"
+    assert write_if_changed(p, "a") and p.read_text() == "a"
+    os.utime(p, (1, 1))
+    assert not write_if_changed(p, "a") and p.stat().st_mtime == 1
+    assert write_if_changed(p, b"b") and p.read_text() == "b" and p.stat().st_mtime > 1
+    assert re.fullmatch(r"[ab]", p.read_text())
