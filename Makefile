@@ -79,7 +79,7 @@ notebooks-sync: setup
 
 # the graph (mk/reproduce.mk): every result, table, figure and executed notebook of PROFILE, and the PDF
 # when LaTeX is installed
-reproduce: $(STAGES) $(RESULTS) $(NOTEBOOKS) $(PDF) | $(VENV_OK)
+reproduce: $(STAGES) $(RESULTS) $(YCBV_RESULTS) $(NOTEBOOKS) $(PDF) | $(VENV_OK)
 ifeq ($(HAVE_LATEX),)
 ifneq ($(filter demo smoke reproduce paper,$(MAKECMDGOALS)),)
 $(info paper PDF skipped: latexmk/pdflatex not found (install them with `make setup WITH_LATEX=1`))
@@ -88,7 +88,7 @@ endif
 demo smoke: reproduce
 
 # the graph up to the result files (results/PROFILE/*.json), without notebooks and write-up
-evaluations: $(STAGES) $(RESULTS)
+evaluations: $(STAGES) $(RESULTS) $(YCBV_RESULTS)
 
 # the tables and figures of notebook 07 (Tables I-III, per object, Fig. 7, accuracy vs threshold)
 tables: $(TEX_OUT) $(FIG_OUT)

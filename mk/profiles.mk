@@ -24,6 +24,10 @@
 #   LIMIT       images per pose method and split (register / predict-pose / evaluate --limit; 0: all)
 #   NB04        images per method in notebook 04's own comparison (an illustration; the tables of
 #               record come from the graph's results)
+#   YCBV        the synthetic-to-real branch (mk/reproduce.mk, notebook 09): yes = pose networks trained only
+#               on the generated `ycbv` / `ycbv_ideal` data, scored with the hybrid methods on the real
+#               YCB-Video frames of YCBV_REAL; no = notebook 09 trains its own smoke network on 6 generated
+#               images (a pipeline check)
 
 PROFILES   := smoke        demo         cpu          paper
 TRAIN_GEN  := smoke        demo         train        paper
@@ -35,6 +39,13 @@ POSE       := smoke        smoke        cpu          paper
 METHODS    := few          all          all          all
 LIMIT      := 0            0            0            0
 NB04       := 2            2            20           100
+YCBV       := no           no           yes          yes
+
+# train-pose arguments of the synthetic-to-real networks where YCBV is yes. cpu: the cpu profile for a
+# fixed 6 epochs (1,800 steps) instead of its 40-minute budget, so the networks compared (kinect vs ideal
+# depth, with and without colour jitter) get equal steps whatever else shares the machine
+YCBV_POSE_cpu   := --profile cpu --epochs 6 --set time_budget=0
+YCBV_POSE_paper := --profile paper
 
 # ---- the column of $(PROFILE) ----
 _IDX := $(strip $(foreach i,1 2 3 4 5 6 7 8,$(if $(filter $(PROFILE),$(word $(i),$(PROFILES))),$(i))))
@@ -52,6 +63,7 @@ P_POSE       := $(call _col,POSE)
 P_METHODS    := $(call _col,METHODS)
 P_LIMIT      := $(call _col,LIMIT)
 P_NB04       := $(call _col,NB04)
+P_YCBV       := $(call _col,YCBV)
 
 # ---- paths of $(PROFILE) ----
 TRAIN_DIR  := data/$(P_TRAIN_GEN)

@@ -94,9 +94,60 @@ endef
 $(foreach s,$(SPLITS),$(foreach k,$(MASKS),$(foreach m,$(METHODS),$(eval $(call pose_rule,$(s),$(k),$(m))))))
 
 # the stages in the order of the plan (`make -n reproduce` lists them so)
-STAGES := $(foreach g,$(DATASETS),data/$(g)/manifest.json) $(RUNS)/seg/model.pt $(RUNS)/pose/model.pt \
-	$(RUNS)/refiner/model.pt $(RUNS)/masks/test/meta.json $(RUNS)/masks/single/meta.json
+STAGES = $(foreach g,$(DATASETS),data/$(g)/manifest.json) $(RUNS)/seg/model.pt $(RUNS)/pose/model.pt \
+	$(RUNS)/refiner/model.pt $(RUNS)/masks/test/meta.json $(RUNS)/masks/single/meta.json $(YCBV_STAGES)
 RESULTS := $(foreach s,$(SPLITS),$(foreach k,$(MASKS),$(foreach m,$(METHODS),$(RES)/$(s)_$(k)_$(m).json)))
+
+# ---- synthetic to real (notebook 09): networks trained only on generated YCB-Video data -----------
+# YCBV_REAL (a BOP YCB-Video root, split YCBV_SPLIT) holds the real frames they are scored on, with the
+# hybrid methods beside them; the sample's models carry no symmetry annotations, hence YCBV_SYMMETRIC
+# (BOP's symmetric YCB-Video objects). Point YCBV_REAL/YCBV_SPLIT at other real frames to score there.
+YCBV_REAL ?= ../shared/data/ycbv_sample
+YCBV_SPLIT ?= train_real
+YCBV_SYMMETRIC ?= 1,13,14,16,18,19,20,21
+ifeq ($(P_YCBV),yes)
+YCBV_DATASETS := ycbv ycbv_ideal
+$(foreach g,$(YCBV_DATASETS),$(eval data/$(g)/manifest.json: | $(VENV_OK) ; \
+	$(SIXDPOSE) generate --profile $(g) --out data/$(g) --workers $(WORKERS) --no-progress))
+DATASETS += $(YCBV_DATASETS)
+# run -> its training data and extra train-pose arguments
+YCBV_RUNS := pose_ycbv pose_ycbv_ideal pose_ycbv_jitter pose_ycbv_ideal_jitter
+DATA_pose_ycbv := data/ycbv
+DATA_pose_ycbv_jitter := data/ycbv
+DATA_pose_ycbv_ideal := data/ycbv_ideal
+DATA_pose_ycbv_ideal_jitter := data/ycbv_ideal
+JITTER := --set colour_jitter=0.3
+$(foreach r,$(YCBV_RUNS),$(eval $(RUNS)/$(r)/model.pt: $(DATA_$(r))/manifest.json | $(VENV_OK) ; \
+	$(SIXDPOSE) train-pose --data $(DATA_$(r)) --out $$(@D) --no-progress \
+	  $$(if $$(wildcard $$(@D)/last.pt),--resume,$(YCBV_POSE_$(PROFILE)) $(if $(findstring jitter,$(r)),$(JITTER)))))
+# method -> command and the run it needs
+YCBV_CMD_learned              := predict-pose --pose $(RUNS)/pose_ycbv
+YCBV_CMD_learned_icp          := predict-pose --pose $(RUNS)/pose_ycbv --icp
+YCBV_CMD_learned_colour       := predict-pose --pose $(RUNS)/pose_ycbv --colour-verify
+YCBV_CMD_learned_ideal        := predict-pose --pose $(RUNS)/pose_ycbv_ideal
+YCBV_CMD_learned_jitter       := predict-pose --pose $(RUNS)/pose_ycbv_jitter
+YCBV_CMD_learned_ideal_jitter := predict-pose --pose $(RUNS)/pose_ycbv_ideal_jitter
+YCBV_CMD_ransac_icp           := register --method ransac --icp --workers $(WORKERS) --min-px 0
+YCBV_CMD_fgr_icp              := register --method fgr --icp --workers $(WORKERS) --min-px 0
+YCBV_CMD_super4pcs_icp        := register --method super4pcs --icp --workers $(WORKERS) --min-px 0
+YCBV_METHODS := learned learned_icp learned_colour learned_ideal learned_jitter learned_ideal_jitter ransac_icp fgr_icp \
+	super4pcs_icp
+_ycbv_needs = $(if $(filter predict-pose,$(firstword $(YCBV_CMD_$(1)))),$(word 3,$(YCBV_CMD_$(1)))/model.pt)
+define ycbv_rule
+$(POSES)/ycbv_gt_$(1).csv: $(call _ycbv_needs,$(1)) | $(VENV_OK)
+	$(SIXDPOSE) $(YCBV_CMD_$(1)) --data $(YCBV_REAL) --split $(YCBV_SPLIT) --masks gt --no-progress --out $$@
+
+$(RES)/ycbv_gt_$(1).json: $(POSES)/ycbv_gt_$(1).csv | $(VENV_OK)
+	$(SIXDPOSE) evaluate --data $(YCBV_REAL) --split $(YCBV_SPLIT) --symmetric-ids $(YCBV_SYMMETRIC) --min-px 0 \
+	  --results $$< --no-progress --all-images --label ycbv_gt_$(1) --result-name ycbv_gt_$(1) --results-dir $(RES)
+endef
+$(foreach m,$(YCBV_METHODS),$(eval $(call ycbv_rule,$(m))))
+YCBV_STAGES := $(foreach r,$(YCBV_RUNS),$(RUNS)/$(r)/model.pt)
+YCBV_RESULTS := $(foreach m,$(YCBV_METHODS),$(RES)/ycbv_gt_$(m).json)
+NB09_ARGS := -p TRAIN_DATA ../data/ycbv -p POSE_RUN ../$(RUNS)/pose_ycbv -p IDEAL_RUN ../$(RUNS)/pose_ycbv_ideal \
+	-p POSE_PROFILE $(P_POSE)
+NB09_NEEDS := $(RUNS)/pose_ycbv/model.pt $(RUNS)/pose_ycbv_ideal/model.pt
+endif
 
 # ---- LM-O (Table I): only with LMO=/path/to/lmo (a full BOP LM-O with depth and masks) ----------
 ifneq ($(strip $(LMO)),)
@@ -162,8 +213,14 @@ $(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT) &: notebooks/07_evaluation.ipy
 	| $(VENV_OK)
 	$(call papermill,$<,-p PROFILE $(PROFILE) -p RESULTS ../$(RES) -p TEX ../$(GEN) -p TRAIN_DATA ../$(TRAIN_DIR) $(NB_FIG))
 
+# notebook 09: the synthetic-to-real networks of the YCBV branch (or, without it, its own smoke network)
+$(EXEC)/09_synthetic_to_real.ipynb: notebooks/09_synthetic_to_real.ipynb $(NB09_NEEDS) | $(VENV_OK)
+	$(call papermill,$<,-p PROFILE $(PROFILE) -p WORKERS $(WORKERS) -p BOP_DATA $(abspath $(YCBV_REAL)) \
+	  -p BOP_SPLIT $(YCBV_SPLIT) $(NB09_ARGS) $(NB_FIG))
+
 NOTEBOOKS := $(addprefix $(EXEC)/,01_generate_dataset.ipynb 02_dataset_overview.ipynb 03_train_segmentation.ipynb \
-	04_hybrid_registration.ipynb 05_train_pose_network.ipynb 06_train_refiner.ipynb 07_evaluation.ipynb 08_real_data.ipynb)
+	04_hybrid_registration.ipynb 05_train_pose_network.ipynb 06_train_refiner.ipynb 07_evaluation.ipynb 08_real_data.ipynb \
+	09_synthetic_to_real.ipynb)
 
 # ---- the write-up ----------------------------------------------------------------------------
 # paper/build/P/paper.pdf per profile; paper/paper.pdf is a copy of the last one built

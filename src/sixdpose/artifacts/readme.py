@@ -190,8 +190,48 @@ def _ycbv_bop(src: Source) -> str:
     return table + note
 
 
+#: Methods on the real YCB-Video frames (``make reproduce PROFILE=cpu``'s synthetic-to-real branch):
+#: (label, training data of the network or "" for a hybrid method, result).
+YCBV_REAL = [
+    ("learned", "`ycbv` (kinect depth)", "cpu/ycbv_gt_learned"),
+    ("learned", "`ycbv_ideal` (ideal depth)", "cpu/ycbv_gt_learned_ideal"),
+    ("learned, colour jitter 0.3", "`ycbv` (kinect depth)", "cpu/ycbv_gt_learned_jitter"),
+    ("learned, colour jitter 0.3", "`ycbv_ideal` (ideal depth)", "cpu/ycbv_gt_learned_ideal_jitter"),
+    ("learned + ICP", "`ycbv` (kinect depth)", "cpu/ycbv_gt_learned_icp"),
+    ("learned + colour verification", "`ycbv` (kinect depth)", "cpu/ycbv_gt_learned_colour"),
+    ("Hybrid (RANSAC + ICP)", "", "cpu/ycbv_gt_ransac_icp"),
+    ("Hybrid (FGR + ICP)", "", "cpu/ycbv_gt_fgr_icp"),
+    ("Hybrid (Super4PCS + ICP)", "", "cpu/ycbv_gt_super4pcs_icp"),
+]
+
+
+def _ycbv_synthetic_to_real(src: Source) -> str:
+    rows = []
+    for label, data, name in YCBV_REAL:
+        f = src(name).figures
+        b = f.get("bop") or {}
+        rows.append([label, data, f"{fmt(f['accuracy'])} ({f['n_correct']}/{f['n_gt']})", b.get("ar"), b.get("adds_auc"),
+                     f["fps"]])
+    return md_table(["method", "trained only on", "ADD(-S) % (correct/GT)", "AR", "ADD-S AUC", "FPS (CPU)"], rows) + \
+        "\n\nFPS: frames / the sum of their per-frame times in the results CSV (2-core CPU, disk reads excluded; " \
+        "`register --workers 2` for the hybrid rows)."
+
+
+def _ycbv_synthetic_to_real_per_object(src: Source) -> str:
+    cols = [(f"{label}{' (' + data.split()[0] + ')' if data else ''}", name) for label, data, name in YCBV_REAL
+            if "jitter" not in label]
+    res = [src(n) for _, n in cols]
+    rows = []
+    for r0 in res[0].rows:
+        key = r0["obj_id"]
+        rows.append([key, r0["name"], r0["n_gt"], *[r.row(obj_id=key)["add_s_accuracy"] for r in res]])
+    return md_table(["obj_id", "object", "GT instances", *[c for c, _ in cols]], rows)
+
+
 #: Curated README blocks: marker name -> renderer.
 BLOCKS = {
+    "ycbv_synthetic_to_real": _ycbv_synthetic_to_real,
+    "ycbv_synthetic_to_real_per_object": _ycbv_synthetic_to_real_per_object,
     "learned_cpu_summary": _learned_cpu_summary,
     "learned_cpu_per_object": _learned_cpu_per_object,
     "depth_noise": _depth_noise,

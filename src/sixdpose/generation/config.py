@@ -213,6 +213,8 @@ YCBV_SYMMETRIC: tuple[str, ...] = tuple(bop_name(k) for k in (1, 13, 14, 16, 18,
 #: BOP models as targets (ground truth in their model frames and obj_ids), the other YCB objects as
 #: noise, the YCB-Video camera on a closer arc, ``kinect`` depth, a smaller table with fewer objects (the
 #: camera's narrow view sees a 0.4 x 0.3 m patch at 0.8 m), and a BOP copy in ``<out>/bop/train_synt``.
+#: ``ycbv_ideal``: the same scenes and images with the ideal depth (what the ``kinect`` model buys on real
+#: frames is measured against it).
 #:
 #: Held-out splits of the ``make reproduce`` graph (never trained or tuned on): ``test_single`` (seed 400,
 #: 200 images) is the paper's single-instance subset of section V-D (``max_instances=1``: no object, target
@@ -237,6 +239,7 @@ PROFILES: dict[str, GenerationConfig] = {
                              symmetric_objects=YCBV_SYMMETRIC, bop_ycb_map="ycbv", sensor="kinect",
                              bop_export="train_synt", camera=YCBV_CAMERA),
 }
+PROFILES["ycbv_ideal"] = PROFILES["ycbv"].replace(sensor="ideal")
 
 
 def camera_from_bop(path) -> dict:
