@@ -5,6 +5,8 @@
 #   make demo       the whole graph at laptop scale (= make reproduce PROFILE=demo): every table, figure, the PDF
 #   make reproduce  the graph of mk/reproduce.mk for PROFILE (paper by default: GPU machine, 25,000 images);
 #                   files keyed by their inputs, so an interrupted run resumes; `make -n reproduce` prints the plan
+#   make ycbv       PROFILE=cpu|paper: only the synthetic-to-real branch (networks trained on generated
+#                   YCB-Video data, scored on YCBV_REAL's real frames)
 #   make paper      the write-up PDF of PROFILE (paper/build/PROFILE/paper.pdf, copied to paper/paper.pdf)
 #   make benchmark  the benchmark scripts (print their figures, write them to results/)
 #   make results-readme  rewrite the README's generated tables from results/ (results-check: only compare)
@@ -35,7 +37,7 @@ PROFILE ?= paper
 include mk/profiles.mk
 include mk/reproduce.mk
 
-.PHONY: setup apt venv test test-fast notebooks-sync demo smoke reproduce evaluations paper tables benchmark results-readme \
+.PHONY: setup apt venv test test-fast notebooks-sync demo smoke reproduce evaluations ycbv paper tables benchmark results-readme \
 	results-check
 .DELETE_ON_ERROR:
 
@@ -89,6 +91,15 @@ demo smoke: reproduce
 
 # the graph up to the result files (results/PROFILE/*.json), without notebooks and write-up
 evaluations: $(STAGES) $(RESULTS) $(YCBV_RESULTS)
+
+# the synthetic-to-real branch alone (PROFILE=cpu or paper): the ycbv datasets, their networks and their
+# results on the real frames of YCBV_REAL (results/PROFILE/$(YCBV_NAME)_gt_*.json)
+ycbv: $(YCBV_RESULTS)
+ifneq ($(filter ycbv,$(MAKECMDGOALS)),)
+ifneq ($(P_YCBV),yes)
+$(error make ycbv needs PROFILE=cpu or PROFILE=paper (PROFILE=$(PROFILE) has no synthetic-to-real branch))
+endif
+endif
 
 # the tables and figures of notebook 07 (Tables I-III, per object, Fig. 7, accuracy vs threshold)
 tables: $(TEX_OUT) $(FIG_OUT)

@@ -101,10 +101,12 @@ RESULTS := $(foreach s,$(SPLITS),$(foreach k,$(MASKS),$(foreach m,$(METHODS),$(R
 # ---- synthetic to real (notebook 09): networks trained only on generated YCB-Video data -----------
 # YCBV_REAL (a BOP YCB-Video root, split YCBV_SPLIT) holds the real frames they are scored on, with the
 # hybrid methods beside them; the sample's models carry no symmetry annotations, hence YCBV_SYMMETRIC
-# (BOP's symmetric YCB-Video objects). Point YCBV_REAL/YCBV_SPLIT at other real frames to score there.
+# (BOP's symmetric YCB-Video objects). To score other real frames, point YCBV_REAL/YCBV_SPLIT at them
+# and give them a name of their own (YCBV_NAME), which prefixes their results CSVs and result files.
 YCBV_REAL ?= ../shared/data/ycbv_sample
 YCBV_SPLIT ?= train_real
 YCBV_SYMMETRIC ?= 1,13,14,16,18,19,20,21
+YCBV_NAME ?= ycbv
 ifeq ($(P_YCBV),yes)
 YCBV_DATASETS := ycbv ycbv_ideal
 $(foreach g,$(YCBV_DATASETS),$(eval data/$(g)/manifest.json: | $(VENV_OK) ; \
@@ -134,16 +136,16 @@ YCBV_METHODS := learned learned_icp learned_colour learned_ideal learned_jitter 
 	super4pcs_icp
 _ycbv_needs = $(if $(filter predict-pose,$(firstword $(YCBV_CMD_$(1)))),$(word 3,$(YCBV_CMD_$(1)))/model.pt)
 define ycbv_rule
-$(POSES)/ycbv_gt_$(1).csv: $(call _ycbv_needs,$(1)) | $(VENV_OK)
+$(POSES)/$(YCBV_NAME)_gt_$(1).csv: $(call _ycbv_needs,$(1)) | $(VENV_OK)
 	$(SIXDPOSE) $(YCBV_CMD_$(1)) --data $(YCBV_REAL) --split $(YCBV_SPLIT) --masks gt --no-progress --out $$@
 
-$(RES)/ycbv_gt_$(1).json: $(POSES)/ycbv_gt_$(1).csv | $(VENV_OK)
+$(RES)/$(YCBV_NAME)_gt_$(1).json: $(POSES)/$(YCBV_NAME)_gt_$(1).csv | $(VENV_OK)
 	$(SIXDPOSE) evaluate --data $(YCBV_REAL) --split $(YCBV_SPLIT) --symmetric-ids $(YCBV_SYMMETRIC) --min-px 0 \
-	  --results $$< --no-progress --all-images --label ycbv_gt_$(1) --result-name ycbv_gt_$(1) --results-dir $(RES)
+	  --results $$< --no-progress --all-images --label $(YCBV_NAME)_gt_$(1) --result-name $(YCBV_NAME)_gt_$(1) --results-dir $(RES)
 endef
 $(foreach m,$(YCBV_METHODS),$(eval $(call ycbv_rule,$(m))))
 YCBV_STAGES := $(foreach r,$(YCBV_RUNS),$(RUNS)/$(r)/model.pt)
-YCBV_RESULTS := $(foreach m,$(YCBV_METHODS),$(RES)/ycbv_gt_$(m).json)
+YCBV_RESULTS := $(foreach m,$(YCBV_METHODS),$(RES)/$(YCBV_NAME)_gt_$(m).json)
 NB09_ARGS := -p TRAIN_DATA ../data/ycbv -p POSE_RUN ../$(RUNS)/pose_ycbv -p IDEAL_RUN ../$(RUNS)/pose_ycbv_ideal \
 	-p POSE_PROFILE $(P_POSE)
 NB09_NEEDS := $(RUNS)/pose_ycbv/model.pt $(RUNS)/pose_ycbv_ideal/model.pt
