@@ -24,7 +24,7 @@ ABLATION_VAL = None  # held-out split of the ablation (never test); None: TEST_D
 ABLATION_EPOCHS = None  # epochs of training per variant; None: smoke/demo 3, cpu 1 (ignored when ABLATION_BUDGET is set)
 ABLATION_BUDGET = None  # seconds of training per variant instead of epochs; None: paper 1200, else unused
 FIGURES = "../figures"
-RESULTS = "../results"  # result artifacts (cpu and paper profiles only)
+RESULTS = None  # result artifacts; None: ../results/<PROFILE> (the graph's, gitignored for smoke and demo)
 
 # %%
 import os
@@ -41,6 +41,7 @@ ABLATION_VAL = ABLATION_VAL or (TEST_DATA if SMALL else "../data/val")
 if ABLATION_BUDGET is None and PROFILE == "paper":
     ABLATION_BUDGET = 1200
 ABLATION_EPOCHS = ABLATION_EPOCHS or (3 if SMALL else 1)
+RESULTS = RESULTS or f"../results/{PROFILE}"
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -108,9 +109,8 @@ plt.show()
 budget = {"time_budget": ABLATION_BUDGET} if ABLATION_BUDGET else {"epochs": ABLATION_EPOCHS}
 ablation = run_ablation(DATA, ABLATION_VAL, f"{RUN_DIR}_ablation", profile=POSE_PROFILE, val_images=TEST_IMAGES, **budget)
 write_table(ablation, list(ablation.columns), figures / f"pose_ablation_{PROFILE}.csv", figures / f"pose_ablation_{PROFILE}.tex")
-if not SMALL:  # a result worth keeping: results/pose_ablation_<profile>.json (+ .csv), with its provenance
-    write_result(f"pose_ablation_{PROFILE}", ablation, units={"train_seconds": "s", "val_add": "%", "n_val": "GT instances"},
-                 description=f"pose ablation: each variant trained on {DATA} ({budget}), ADD(-S) on {ABLATION_VAL} "
-                             "(GT masks, >= 400 visible px)", config={"profile": POSE_PROFILE, **budget},
-                 results_dir=RESULTS)
+# the result artifact results/<profile>/pose_ablation_<profile>.json (+ .csv), with its provenance (the write-up's table)
+write_result(f"pose_ablation_{PROFILE}", ablation, units={"train_seconds": "s", "val_add": "%", "n_val": "GT instances"},
+             description=f"pose ablation: each variant trained on {DATA} ({budget}), ADD(-S) on {ABLATION_VAL} "
+                         "(GT masks, >= 400 visible px)", config={"profile": POSE_PROFILE, **budget}, results_dir=RESULTS)
 ablation

@@ -212,3 +212,33 @@ def test_write_if_changed(tmp_path):
     assert not write_if_changed(p, "a") and p.stat().st_mtime == 1
     assert write_if_changed(p, b"b") and p.read_text() == "b" and p.stat().st_mtime > 1
     assert re.fullmatch(r"[ab]", p.read_text())
+
+
+def test_real_frames_and_ablation_tables(tmp_path):
+    """The synthetic-to-real rows (``ycbv_gt_*``) and the ablation (``pose_ablation_<profile>``) as tables
+    and sentences; without their result files, one row and an n/a sentence say so."""
+    d = tmp_path / "results"
+    d.mkdir()
+    assert report.real_table(d) == [] and report.ablation_table(d, "cpu") == []
+    rows = report.write_real_table(d, tmp_path / "r.csv", tmp_path / "r.tex")
+    assert rows == [] and "not run at this profile" in (tmp_path / "r.tex").read_text()
+    f = report.beyond_findings(d, "cpu")
+    assert all(v.startswith("n/a") for v in f.values()) and set(f) == {"finding@real", "finding@sensor", "finding@ablation"}
+    for name, acc, auc in (("ycbv_gt_learned", 36.0, 85.0), ("ycbv_gt_learned_ideal", 36.0, 76.0),
+                           ("ycbv_gt_learned_colour", 75.0, 90.0), ("ycbv_gt_super4pcs_icp", 90.0, 97.0)):
+        write_result(name, {"accuracy": acc, "n_gt": 140, "bop": {"ar": 5.0, "adds_auc": auc}}, results_dir=d)
+    write_result("pose_ablation_cpu", [{"variant": "paper (absolute t, quaternion, no norm)", "val_add": 3.0, "steps": 300},
+                                       {"variant": "+ centroid offset", "val_add": 14.0, "steps": 300}], results_dir=d)
+    rows = report.write_real_table(d, tmp_path / "r.csv", tmp_path / "r.tex")
+    assert [(r["method"], r["trained_on"]) for r in rows] == [
+        ("learned", "ycbv (kinect depth)"), ("learned", "ycbv_ideal (ideal depth)"),
+        ("learned + colour verification", "ycbv (kinect depth)"), ("Super4PCS + ICP", "--")]
+    assert rows[0]["adds_auc"] == 85.0
+    f = report.beyond_findings(d, "cpu")
+    assert "36.00 % ADD(-S) on 140 real instances, 75.00 %" in f["finding@real"] and "90.00 % (Super4PCS + ICP)" in f["finding@real"]
+    assert "equal to the same network trained on ideal depth" in f["finding@sensor"]
+    assert "9.00 points higher than the ideal-depth network's" in f["finding@sensor"]
+    assert f["finding@ablation"].startswith("the best of 2 variants on the validation split is + centroid offset (14.00 %)")
+    assert "paper's choices reach 3.00 %" in f["finding@ablation"]
+    abl = report.write_ablation_table(d, "cpu", tmp_path / "a.csv", tmp_path / "a.tex")
+    assert [r["val_add"] for r in abl] == [3.0, 14.0] and "centroid offset" in (tmp_path / "a.tex").read_text()

@@ -220,11 +220,15 @@ def _ycbv_synthetic_to_real(src: Source) -> str:
 def _ycbv_synthetic_to_real_per_object(src: Source) -> str:
     cols = [(f"{label}{' (' + data.split()[0] + ')' if data else ''}", name) for label, data, name in YCBV_REAL
             if "jitter" not in label]
+    from ..assets.bop import BOP_YCB_MAPS
+
+    ycb = BOP_YCB_MAPS["ycbv"]
     res = [src(n) for _, n in cols]
     rows = []
     for r0 in res[0].rows:
         key = r0["obj_id"]
-        rows.append([key, r0["name"], r0["n_gt"], *[r.row(obj_id=key)["add_s_accuracy"] for r in res]])
+        name = f"{r0['name']} ({ycb[key]})" if isinstance(key, int) and key in ycb else r0["name"]
+        rows.append([key, name, r0["n_gt"], *[r.row(obj_id=key)["add_s_accuracy"] for r in res]])
     return md_table(["obj_id", "object", "GT instances", *[c for c, _ in cols]], rows)
 
 
