@@ -190,24 +190,19 @@ def _ycbv_bop(src: Source) -> str:
     return table + note
 
 
-#: Methods on the real YCB-Video frames (``make reproduce PROFILE=cpu``'s synthetic-to-real branch):
-#: (label, training data of the network or "" for a hybrid method, result).
-YCBV_REAL = [
-    ("learned", "`ycbv` (kinect depth)", "cpu/ycbv_gt_learned"),
-    ("learned", "`ycbv_ideal` (ideal depth)", "cpu/ycbv_gt_learned_ideal"),
-    ("learned, colour jitter 0.3", "`ycbv` (kinect depth)", "cpu/ycbv_gt_learned_jitter"),
-    ("learned, colour jitter 0.3", "`ycbv_ideal` (ideal depth)", "cpu/ycbv_gt_learned_ideal_jitter"),
-    ("learned + ICP", "`ycbv` (kinect depth)", "cpu/ycbv_gt_learned_icp"),
-    ("learned + colour verification", "`ycbv` (kinect depth)", "cpu/ycbv_gt_learned_colour"),
-    ("Hybrid (RANSAC + ICP)", "", "cpu/ycbv_gt_ransac_icp"),
-    ("Hybrid (FGR + ICP)", "", "cpu/ycbv_gt_fgr_icp"),
-    ("Hybrid (Super4PCS + ICP)", "", "cpu/ycbv_gt_super4pcs_icp"),
-]
+def _ycbv_real():
+    """``[(label, training data or "" for a hybrid method, result name)]`` of the real-frame rows, in the
+    order of :data:`sixdpose.evaluation.report.REAL_METHODS` (the write-up's table)."""
+    from ..evaluation.report import REAL_METHODS
+
+    return [(label + (", colour jitter 0.3" if "jitter" in key else ""),
+             f"`{data.split()[0]}` {' '.join(data.split()[1:])}" if data else "", f"cpu/ycbv_gt_{key}")
+            for key, label, data in REAL_METHODS]
 
 
 def _ycbv_synthetic_to_real(src: Source) -> str:
     rows = []
-    for label, data, name in YCBV_REAL:
+    for label, data, name in _ycbv_real():
         f = src(name).figures
         b = f.get("bop") or {}
         rows.append([label, data, f"{fmt(f['accuracy'])} ({f['n_correct']}/{f['n_gt']})", b.get("ar"), b.get("adds_auc"),
@@ -218,7 +213,7 @@ def _ycbv_synthetic_to_real(src: Source) -> str:
 
 
 def _ycbv_synthetic_to_real_per_object(src: Source) -> str:
-    cols = [(f"{label}{' (' + data.split()[0] + ')' if data else ''}", name) for label, data, name in YCBV_REAL
+    cols = [(f"{label}{' (' + data.split()[0] + ')' if data else ''}", name) for label, data, name in _ycbv_real()
             if "jitter" not in label]
     from ..assets.bop import BOP_YCB_MAPS
 
