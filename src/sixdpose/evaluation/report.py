@@ -658,44 +658,46 @@ def write_ablation_table(results_dir: str | Path, profile: str, csv_path, tex_pa
 
 def beyond_findings(results_dir: str | Path, profile: str, name: str = "ycbv") -> dict[str, str]:
     """Sentences for the write-up on the real frames (``finding@real``, ``finding@sensor``) and the ablation
-    (``finding@ablation``), computed from the result files (``n/a`` text where they are missing)."""
+    (``finding@ablation``), computed from the result files. Each is a whole sentence (or empty where it
+    has nothing to compare), saying so where the profile did not run the results it needs."""
     out = {}
     real = {k: _optional(results_dir, f"{name}_gt_{k}") for k, _, _ in REAL_METHODS}
     acc = {k: (r.figures.get("accuracy") if r else None) for k, r in real.items()}
     auc = {k: ((r.figures.get("bop") or {}).get("adds_auc") if r else None) for k, r in real.items()}
     if acc["learned"] is not None:
         hybrid = [(acc[k], lab) for k, lab, d in REAL_METHODS if not d and acc[k] is not None]
-        s = (f"the network trained only on generated data reaches {acc['learned']:.2f} % ADD(-S) on "
+        s = (f"The network trained only on generated data reaches {acc['learned']:.2f} % ADD(-S) on "
              f"{real['learned'].figures.get('n_gt')} real instances")
         if acc["learned_colour"] is not None:
-            s += f", {acc['learned_colour']:.2f} % with the hybrid stage's colour verification after it"
+            s += f", and {acc['learned_colour']:.2f} % with the hybrid stage's colour verification after it"
         if hybrid:
             h = max(hybrid)
             s += f"; the best hybrid method, which needs no training data, reaches {h[0]:.2f} % ({h[1]})"
-        out["real"] = s
+        out["real"] = s + "."
     else:
-        out["real"] = "n/a (the synthetic-to-real branch did not run at this profile)"
+        out["real"] = ("This profile does not run that branch (the cpu and paper profiles do, and make ycbv runs it "
+                       "alone), so the table is empty.")
     if acc["learned"] is not None and acc["learned_ideal"] is not None:
-        s = (f"the network trained on the kinect sensor model's depth scores {acc['learned']:.2f} % ADD(-S), "
+        s = (f"Trained on the kinect sensor model's depth, the network scores {acc['learned']:.2f} % ADD(-S), "
              f"{_cmp(acc['learned'] - acc['learned_ideal'])} the same network trained on ideal depth "
              f"({acc['learned_ideal']:.2f} %)")
         if auc["learned"] is not None and auc["learned_ideal"] is not None:
             s += (f"; its ADD-S AUC, which rewards every millimetre, is {auc['learned']:.2f}, "
                   f"{_cmp(auc['learned'] - auc['learned_ideal'])} the ideal-depth network's ({auc['learned_ideal']:.2f})")
-        out["sensor"] = s
+        out["sensor"] = s + "."
     else:
-        out["sensor"] = "n/a (the kinect-depth and ideal-depth networks were not both scored)"
+        out["sensor"] = ""
     rows = ablation_table(results_dir, profile)
     scored = [r for r in rows if r.get("val_add") is not None]
     if scored:
         best = max(scored, key=lambda r: r["val_add"])
         paper = next((r for r in scored if str(r["variant"]).startswith("paper")), None)
-        s = f"the best of {len(scored)} variants on the validation split is {best['variant']} ({best['val_add']:.2f} %)"
+        s = f"The best of {len(scored)} variants on the validation split is {best['variant']} ({best['val_add']:.2f} %)"
         if paper is not None:
             s += f"; the paper's choices reach {paper['val_add']:.2f} %"
-        out["ablation"] = s
+        out["ablation"] = s + "."
     else:
-        out["ablation"] = "n/a (the ablation did not run at this profile)"
+        out["ablation"] = "This profile has not run the ablation, so the table is empty."
     return {f"finding@{k}": v for k, v in out.items()}
 
 
