@@ -158,6 +158,11 @@ def test_curves_fig7_and_dataset_table(results, tmp_path):
         report.dataset_table(tmp_path / "missing.csv", tmp_path / "x.tex")
     vals = report.dataset_values(e, tmp_path, None)
     assert vals == {"images@test": "n/a", "seed@test": "n/a", "images@single": "n/a", "seed@single": "n/a", "images@train": "n/a"}
+    (tmp_path / "train").mkdir()
+    (tmp_path / "train" / "manifest.json").write_text(json.dumps({"num_images": 1200}))
+    assert report.dataset_values(e, tmp_path, tmp_path / "train")["images@train"] == "1,200 images"
+    assert "\\csname sdp@val@images@train\\endcsname{1,200 images}" in report.macros(e, "cpu", extra=report.dataset_values(
+        e, tmp_path, tmp_path / "train"))  # a thousands comma, not an escaped {,}
 
 
 # --------------------------------------------------------------------------------------------

@@ -403,7 +403,8 @@ def _manifest(path: Path) -> dict | None:
 
 
 def _images(n) -> str:
-    return "n/a" if n is None else f"{_num(n, 0)} image{'' if n == 1 else 's'}"
+    # plain text (a \\val value is escaped for LaTeX): the thousands comma needs no braces outside maths
+    return "n/a" if n is None else f"{int(n):,} image{'' if n == 1 else 's'}"
 
 
 def dataset_values(entries: dict, root: str | Path = ".", train_data: str | Path | None = None) -> dict[str, str]:
