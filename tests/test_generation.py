@@ -300,41 +300,51 @@ def test_sensor_setting_applies_the_model_to_depth_only(tmp_path, ycb_dir, smoke
     assert "sensor: kinect" in (b / "config.yml").read_text()
 
 
-def test_diverging_simulation_is_redrawn(tmp_path, ycb_dir, smoke_config, monkeypatch):
+_DIVERGING = """
+import json, sys
+from pathlib import Path
+from sixdpose.generation import generate, runner
+from sixdpose.generation import sim as simmod
+from sixdpose.generation.config import GenerationConfig
+from sixdpose.generation.objects import resolve_objects
+
+class Diverging:
+    def __init__(self, inner):
+        self.inner = inner
+    def Initialize(self):
+        return self.inner.Initialize()
+    def AdvanceTo(self, t):
+        raise RuntimeError("SceneGraph encountered a non-finite value (e.g., NaN or infinity) on a pose input port.")
+
+draws = []
+real_init = simmod.SceneSimulator.__init__
+def init(self, *a, **kw):
+    real_init(self, *a, **kw)
+    draws.append(self)
+    if len(draws) == 1:  # the first draw diverges at its first step
+        self.simulator = Diverging(self.simulator)
+
+out, assets, cfg = Path(sys.argv[1]), sys.argv[2], GenerationConfig.from_dict(json.loads(sys.argv[3]))
+generate(out, cfg.replace(scenes=0), workers=1, assets=assets, progress=False)  # models and config, no scene
+simmod.SceneSimulator.__init__ = init
+r = runner.render_scene(out, cfg, resolve_objects(cfg, assets), 0)
+print(json.dumps({"ok": r["ok"], "error": r.get("error"), "draws": len(draws),
+                  "first_diverged": draws[0]._result.diverged, "first_at_rest": draws[0]._result.at_rest}))
+"""
+
+
+def test_diverging_simulation_is_redrawn(tmp_path, ycb_dir, smoke_config):
     """A draw whose contact solve diverges (Drake: "non-finite value ... on a pose input port") is
     re-drawn like one that does not come to rest, instead of failing the scene (seen on the ycbv
     profile's scene 50). The fault is injected into the first draw's simulator; the scene function runs
-    in this process (the pool's workers are spawned)."""
-    from sixdpose.generation import generate
-    from sixdpose.generation import runner
-    from sixdpose.generation import sim as simmod
-    from sixdpose.generation.objects import resolve_objects
-
-    class Diverging:
-        def __init__(self, inner):
-            self.inner = inner
-
-        def Initialize(self):
-            return self.inner.Initialize()
-
-        def AdvanceTo(self, t):
-            raise RuntimeError("SceneGraph encountered a non-finite value (e.g., NaN or infinity) on a pose input port.")
-
-    draws = []
-    real_init = simmod.SceneSimulator.__init__
-
-    def init(self, *a, **kw):
-        real_init(self, *a, **kw)
-        draws.append(self)
-        if len(draws) == 1:
-            self.simulator = Diverging(self.simulator)
-
+    in a child process (Drake's renderer and torch do not share a process well in a long test session)."""
     cfg = smoke_config.replace(scenes=1, views=1)
     out = tmp_path / "ds"
-    generate(out, cfg.replace(scenes=0), workers=1, assets=ycb_dir, progress=False)  # models, config, no scene
-    monkeypatch.setattr(simmod.SceneSimulator, "__init__", init)
-    r = runner.render_scene(out, cfg, resolve_objects(cfg, ycb_dir), 0)
-    assert r["ok"], r.get("error")
-    assert len(draws) >= 2 and draws[0]._result.diverged and not draws[0]._result.at_rest
+    p = subprocess.run([sys.executable, "-c", _DIVERGING, str(out), str(ycb_dir), json.dumps(cfg.to_dict())],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-2000:]
+    r = json.loads(p.stdout.strip().splitlines()[-1])
+    assert r["ok"], r["error"]
+    assert r["draws"] >= 2 and r["first_diverged"] and not r["first_at_rest"]
     record = json.loads((out / ".scenes" / "000000.json").read_text())
     assert record["attempt"] >= 1
