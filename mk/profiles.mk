@@ -41,9 +41,10 @@ LIMIT      := 0            0            0            0
 NB04       := 2            2            20           100
 YCBV       := no           no           yes          yes
 
-# train-pose arguments of the synthetic-to-real networks where YCBV is yes. cpu: the cpu profile for a
-# fixed 6 epochs (1,800 steps) instead of its 40-minute budget, so the networks compared (kinect vs ideal
-# depth, with and without colour jitter) get equal steps whatever else shares the machine
+# train-pose / train-refiner arguments of the synthetic-to-real networks where YCBV is yes. cpu: the cpu
+# profiles for a fixed 6 epochs (1,800 steps) instead of their 40- and 15-minute budgets, so the networks
+# compared (kinect vs ideal depth, with and without colour jitter) get equal steps whatever else shares
+# the machine
 YCBV_POSE_cpu   := --profile cpu --epochs 6 --set time_budget=0
 YCBV_POSE_paper := --profile paper
 

@@ -122,19 +122,27 @@ JITTER := --set colour_jitter=0.3
 $(foreach r,$(YCBV_RUNS),$(eval $(RUNS)/$(r)/model.pt: $(DATA_$(r))/manifest.json | $(VENV_OK) ; \
 	$(SIXDPOSE) train-pose --data $(DATA_$(r)) --out $$(@D) --no-progress \
 	  $$(if $$(wildcard $$(@D)/last.pt),--resume,$(YCBV_POSE_$(PROFILE)) $(if $(findstring jitter,$(r)),$(JITTER)))))
-# method -> command and the run it needs
+# the refiners of the two networks without jitter (the paper's learned method is the network + 2 iterations)
+$(foreach r,pose_ycbv pose_ycbv_ideal,$(eval $(RUNS)/$(subst pose,refiner,$(r))/model.pt: $(RUNS)/$(r)/model.pt \
+	$(DATA_$(r))/manifest.json | $(VENV_OK) ; \
+	$(SIXDPOSE) train-refiner --pose $(RUNS)/$(r) --data $(DATA_$(r)) --out $$(@D) --no-progress \
+	  $$(if $$(wildcard $$(@D)/last.pt),--resume,$(YCBV_POSE_$(PROFILE)))))
+# method -> command and the runs it needs
 YCBV_CMD_learned              := predict-pose --pose $(RUNS)/pose_ycbv
+YCBV_CMD_learned_it2          := predict-pose --pose $(RUNS)/pose_ycbv --refiner $(RUNS)/refiner_ycbv --iterations 2
 YCBV_CMD_learned_icp          := predict-pose --pose $(RUNS)/pose_ycbv --icp
 YCBV_CMD_learned_colour       := predict-pose --pose $(RUNS)/pose_ycbv --colour-verify
 YCBV_CMD_learned_ideal        := predict-pose --pose $(RUNS)/pose_ycbv_ideal
+YCBV_CMD_learned_ideal_it2    := predict-pose --pose $(RUNS)/pose_ycbv_ideal --refiner $(RUNS)/refiner_ycbv_ideal --iterations 2
 YCBV_CMD_learned_jitter       := predict-pose --pose $(RUNS)/pose_ycbv_jitter
 YCBV_CMD_learned_ideal_jitter := predict-pose --pose $(RUNS)/pose_ycbv_ideal_jitter
 YCBV_CMD_ransac_icp           := register --method ransac --icp --workers $(WORKERS) --min-px 0
 YCBV_CMD_fgr_icp              := register --method fgr --icp --workers $(WORKERS) --min-px 0
 YCBV_CMD_super4pcs_icp        := register --method super4pcs --icp --workers $(WORKERS) --min-px 0
-YCBV_METHODS := learned learned_icp learned_colour learned_ideal learned_jitter learned_ideal_jitter ransac_icp fgr_icp \
-	super4pcs_icp
-_ycbv_needs = $(if $(filter predict-pose,$(firstword $(YCBV_CMD_$(1)))),$(word 3,$(YCBV_CMD_$(1)))/model.pt)
+YCBV_METHODS := learned learned_it2 learned_icp learned_colour learned_ideal learned_ideal_it2 learned_jitter \
+	learned_ideal_jitter ransac_icp fgr_icp super4pcs_icp
+# the model.pt of every run a command names (--pose, --refiner)
+_ycbv_needs = $(foreach w,$(filter $(RUNS)/%,$(YCBV_CMD_$(1))),$(w)/model.pt)
 define ycbv_rule
 $(POSES)/$(YCBV_NAME)_gt_$(1).csv: $(call _ycbv_needs,$(1)) | $(VENV_OK)
 	$(SIXDPOSE) $(YCBV_CMD_$(1)) --data $(YCBV_REAL) --split $(YCBV_SPLIT) --masks gt --no-progress --out $$@
@@ -144,11 +152,11 @@ $(RES)/$(YCBV_NAME)_gt_$(1).json: $(POSES)/$(YCBV_NAME)_gt_$(1).csv | $(VENV_OK)
 	  --results $$< --no-progress --all-images --label $(YCBV_NAME)_gt_$(1) --result-name $(YCBV_NAME)_gt_$(1) --results-dir $(RES)
 endef
 $(foreach m,$(YCBV_METHODS),$(eval $(call ycbv_rule,$(m))))
-YCBV_STAGES := $(foreach r,$(YCBV_RUNS),$(RUNS)/$(r)/model.pt)
+YCBV_STAGES := $(foreach r,$(YCBV_RUNS) refiner_ycbv refiner_ycbv_ideal,$(RUNS)/$(r)/model.pt)
 YCBV_RESULTS := $(foreach m,$(YCBV_METHODS),$(RES)/$(YCBV_NAME)_gt_$(m).json)
-NB09_ARGS := -p TRAIN_DATA ../data/ycbv -p POSE_RUN ../$(RUNS)/pose_ycbv -p IDEAL_RUN ../$(RUNS)/pose_ycbv_ideal \
-	-p POSE_PROFILE $(P_POSE)
-NB09_NEEDS := $(RUNS)/pose_ycbv/model.pt $(RUNS)/pose_ycbv_ideal/model.pt
+NB09_ARGS := -p TRAIN_DATA ../data/ycbv -p POSE_RUN ../$(RUNS)/pose_ycbv -p REFINER_RUN ../$(RUNS)/refiner_ycbv \
+	-p IDEAL_RUN ../$(RUNS)/pose_ycbv_ideal -p POSE_PROFILE $(P_POSE)
+NB09_NEEDS := $(RUNS)/pose_ycbv/model.pt $(RUNS)/refiner_ycbv/model.pt $(RUNS)/pose_ycbv_ideal/model.pt
 endif
 
 # ---- LM-O (Table I): only with LMO=/path/to/lmo (a full BOP LM-O with depth and masks) ----------

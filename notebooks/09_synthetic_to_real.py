@@ -18,6 +18,7 @@
 PROFILE = None  # smoke (CI), demo (laptop CPU), cpu (this machine, about an hour), paper (GPU)
 TRAIN_DATA = None  # generated ycbv data; None: ../data/ycbv (cpu, paper), else a tiny ../data/ycbv_<PROFILE>
 POSE_RUN = None  # None: ../runs/<PROFILE>/pose_ycbv
+REFINER_RUN = None  # None: ../runs/<PROFILE>/refiner_ycbv (trained on POSE_RUN's network)
 POSE_PROFILE = None  # None: smoke for smoke/demo, else PROFILE
 COLOUR_JITTER = 0.0  # training colour augmentation (0.3 was measured on the sample: no gain at the cpu budget)
 IDEAL_RUN = None  # the same network trained on the ideal-depth twin (../data/ycbv_ideal), scored beside it if trained
@@ -35,6 +36,7 @@ PROFILE = PROFILE or os.environ.get("SIXDPOSE_PROFILE", "smoke")
 SMALL = PROFILE in ("smoke", "demo")
 TRAIN_DATA = TRAIN_DATA or ("../data/ycbv" if not SMALL else f"../data/ycbv_{PROFILE}")
 POSE_RUN = POSE_RUN or f"../runs/{PROFILE}/pose_ycbv"
+REFINER_RUN = REFINER_RUN or f"../runs/{PROFILE}/refiner_ycbv"
 POSE_PROFILE = POSE_PROFILE or ("smoke" if SMALL else PROFILE)
 IDEAL_RUN = IDEAL_RUN or (None if SMALL else f"../runs/{PROFILE}/pose_ycbv_ideal")
 BOP_DATA = BOP_DATA or os.environ.get("SIXDPOSE_BOP") or "../../shared/data/ycbv_sample"
@@ -60,14 +62,15 @@ figures.mkdir(parents=True, exist_ok=True)
 # ## Training data and network
 #
 # `smoke`/`demo`: a tiny `ycbv` dataset (2 scenes x 3 views) and the smoke network, a pipeline check
-# whose accuracy means nothing. `cpu`: the full `ycbv` profile (60 scenes x 20 views, `kinect` depth) and
-# the `cpu` pose network for 6 epochs (the `make reproduce PROFILE=cpu` graph trains it, its ideal-depth
-# twin and both with colour jitter).
+# whose accuracy means nothing. `cpu`: the full `ycbv` profile (60 scenes x 20 views, `kinect` depth), the
+# `cpu` pose network and its refiner for 6 epochs each (the `make reproduce PROFILE=cpu` graph trains them,
+# the ideal-depth twins and the networks with colour jitter).
 
 # %%
 small = {"scenes": 2, "views": 3} if SMALL else {}
 ensure_dataset(TRAIN_DATA, profile="ycbv", workers=WORKERS, **small)
 summary = ensure_trained("pose", TRAIN_DATA, POSE_RUN, profile=POSE_PROFILE, colour_jitter=COLOUR_JITTER, **TRAINING)
+ensure_trained("refiner", TRAIN_DATA, REFINER_RUN, profile=POSE_PROFILE, pose_run=POSE_RUN, **TRAINING)
 plot_training(POSE_RUN, out=figures / f"pose_ycbv_training_{PROFILE}.png", title=f"pose network on generated ycbv data ({POSE_PROFILE})")
 plt.show()
 
@@ -83,6 +86,7 @@ plt.show()
 real = open_dataset(BOP_DATA, split=BOP_SPLIT, symmetric_ids=SYMMETRIC_IDS)
 every_symmetric = open_dataset(BOP_DATA, split=BOP_SPLIT, symmetric_ids=list(real.object_ids))
 methods = {"learned (ycbv, kinect depth)": learned_method(POSE_RUN),
+           "learned + 2 refinement it.": learned_method(POSE_RUN, refiner=REFINER_RUN, iterations=2),
            "learned + ICP": learned_method(POSE_RUN, icp=True),
            "learned + colour verification": learned_method(POSE_RUN, colour_verify=True)}
 if IDEAL_RUN and Path(IDEAL_RUN, "model.pt").is_file():
