@@ -195,8 +195,7 @@ def _ycbv_real():
     order of :data:`sixdpose.evaluation.report.REAL_METHODS` (the write-up's table)."""
     from ..evaluation.report import REAL_METHODS
 
-    return [(label + (", colour jitter 0.3" if "jitter" in key else ""),
-             f"`{data.split()[0]}` {' '.join(data.split()[1:])}" if data else "", f"cpu/ycbv_gt_{key}")
+    return [(label, f"`{data.split()[0]}` {' '.join(data.split()[1:])}" if data else "", f"cpu/ycbv_gt_{key}")
             for key, label, data in REAL_METHODS]
 
 

@@ -600,8 +600,8 @@ REAL_METHODS = (
     ("learned_ideal", "learned", "ycbv_ideal (ideal depth)"),
     ("learned_it2", "learned + 2 refinement it.", "ycbv (kinect depth)"),
     ("learned_ideal_it2", "learned + 2 refinement it.", "ycbv_ideal (ideal depth)"),
-    ("learned_jitter", "learned", "ycbv (kinect depth)"),
-    ("learned_ideal_jitter", "learned", "ycbv_ideal (ideal depth)"),
+    ("learned_jitter", "learned, colour jitter 0.3", "ycbv (kinect depth)"),
+    ("learned_ideal_jitter", "learned, colour jitter 0.3", "ycbv_ideal (ideal depth)"),
     ("learned_icp", "learned + ICP", "ycbv (kinect depth)"),
     ("learned_colour", "learned + colour verification", "ycbv (kinect depth)"),
     ("ransac_icp", "RANSAC + ICP", ""),
@@ -623,7 +623,7 @@ def real_table(results_dir: str | Path, name: str = "ycbv") -> list[dict]:
         if r is None:
             continue
         f, b = r.figures, r.figures.get("bop") or {}
-        rows.append({"method": label + (", colour jitter" if "jitter" in key else ""), "trained_on": data or "--", "accuracy": f.get("accuracy"), "n_gt": f.get("n_gt"),
+        rows.append({"method": label, "trained_on": data or "--", "accuracy": f.get("accuracy"), "n_gt": f.get("n_gt"),
                      "ar": b.get("ar"), "adds_auc": b.get("adds_auc")})
     return rows
 

@@ -99,9 +99,10 @@ def _cmd_ablation(args) -> int:
         raise ConfigError("give the budget of every variant: --epochs N (equal steps) or --time-budget SECONDS (equal time)")
     claim_output_dir(args.out, "pose-ablation")  # refuse a foreign directory before any work
     budget = {"epochs": args.epochs, "time_budget": 0.0} if args.epochs is not None else {"time_budget": args.time_budget}
+    overrides = parse_overrides(args.overrides)
     table = run_ablation(args.train, args.val, args.out, profile=args.profile, variants={n: VARIANTS[n] for n in picked},
                          min_px=args.min_px, val_images=args.val_images, progress=not args.no_progress,
-                         **budget, **parse_overrides(args.overrides))
+                         **budget, **overrides)
     out = Path(args.out)
     write_table(table, list(table.columns), out / "ablation.csv", out / "ablation.tex")
     print(table.to_string(index=False))
@@ -110,7 +111,7 @@ def _cmd_ablation(args) -> int:
                             units={"train_seconds": "s", "val_add": "%", "n_val": "GT instances"},
                             description=f"pose ablation: each variant trained on {args.train} ({budget}), ADD(-S) on "
                                         f"{args.val} (GT masks, >= {args.min_px} visible px)",
-                            config={"profile": args.profile, **budget, **parse_overrides(args.overrides)},
+                            config={"profile": args.profile, **budget, **overrides},
                             results_dir=args.results_dir)
         print(f"result -> {path}")
     return 0
