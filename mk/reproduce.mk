@@ -134,13 +134,15 @@ YCBV_CMD_learned_icp          := predict-pose --pose $(RUNS)/pose_ycbv --icp
 YCBV_CMD_learned_colour       := predict-pose --pose $(RUNS)/pose_ycbv --colour-verify
 YCBV_CMD_learned_ideal        := predict-pose --pose $(RUNS)/pose_ycbv_ideal
 YCBV_CMD_learned_ideal_it2    := predict-pose --pose $(RUNS)/pose_ycbv_ideal --refiner $(RUNS)/refiner_ycbv_ideal --iterations 2
+YCBV_CMD_learned_ideal_icp    := predict-pose --pose $(RUNS)/pose_ycbv_ideal --icp
+YCBV_CMD_learned_ideal_colour := predict-pose --pose $(RUNS)/pose_ycbv_ideal --colour-verify
 YCBV_CMD_learned_jitter       := predict-pose --pose $(RUNS)/pose_ycbv_jitter
 YCBV_CMD_learned_ideal_jitter := predict-pose --pose $(RUNS)/pose_ycbv_ideal_jitter
 YCBV_CMD_ransac_icp           := register --method ransac --icp --workers $(WORKERS) --min-px 0
 YCBV_CMD_fgr_icp              := register --method fgr --icp --workers $(WORKERS) --min-px 0
 YCBV_CMD_super4pcs_icp        := register --method super4pcs --icp --workers $(WORKERS) --min-px 0
-YCBV_METHODS := learned learned_it2 learned_icp learned_colour learned_ideal learned_ideal_it2 learned_jitter \
-	learned_ideal_jitter ransac_icp fgr_icp super4pcs_icp
+YCBV_METHODS := learned learned_it2 learned_icp learned_colour learned_ideal learned_ideal_it2 learned_ideal_icp \
+	learned_ideal_colour learned_jitter learned_ideal_jitter ransac_icp fgr_icp super4pcs_icp
 # the model.pt of every run a command names (--pose, --refiner)
 _ycbv_needs = $(foreach w,$(filter $(RUNS)/%,$(YCBV_CMD_$(1))),$(w)/model.pt)
 define ycbv_rule

@@ -245,10 +245,17 @@ def test_real_frames_and_ablation_tables(tmp_path):
     assert "equal to the same network trained on ideal depth" in f["finding@sensor"]
     assert "9.00 points higher than the ideal-depth network's" in f["finding@sensor"]
     assert "refinement" not in f["finding@sensor"]  # no refined pair: no sentence about it
-    for name, acc in (("ycbv_gt_learned_it2", 30.0), ("ycbv_gt_learned_ideal_it2", 42.86)):
+    for name, acc in (("ycbv_gt_learned_it2", 30.0), ("ycbv_gt_learned_ideal_it2", 42.86),
+                      ("ycbv_gt_learned_ideal_colour", 50.0)):
         write_result(name, {"accuracy": acc, "n_gt": 140}, results_dir=d)
     f = report.beyond_findings(d, "cpu")
-    assert "the kinect pair scores 30.00 %, 12.86 points lower than the ideal-depth pair (42.86 %)." in f["finding@sensor"]
+    assert ("the kinect pair scores 30.00 % after 2 refinement iterations (each network with its own refiner), "
+            "12.86 points lower than the ideal-depth pair (42.86 %); 75.00 % after colour verification, 25.00 points "
+            "higher than the ideal-depth pair (50.00 %).") in f["finding@sensor"]
+    assert "after ICP" not in f["finding@sensor"]  # only one of the ICP pair exists
+    rows = report.real_table(d)
+    assert [r["trained_on"] for r in rows if r["method"] == "learned + colour verification"] == [
+        "ycbv (kinect depth)", "ycbv_ideal (ideal depth)"]
     assert f["finding@ablation"].startswith("The best of 2 variants on the validation split is + centroid offset (14.00 %)")
     assert "paper's choices reach 3.00 %" in f["finding@ablation"]
     abl = report.write_ablation_table(d, "cpu", tmp_path / "a.csv", tmp_path / "a.tex")

@@ -603,10 +603,22 @@ REAL_METHODS = (
     ("learned_jitter", "learned, colour jitter 0.3", "ycbv (kinect depth)"),
     ("learned_ideal_jitter", "learned, colour jitter 0.3", "ycbv_ideal (ideal depth)"),
     ("learned_icp", "learned + ICP", "ycbv (kinect depth)"),
+    ("learned_ideal_icp", "learned + ICP", "ycbv_ideal (ideal depth)"),
     ("learned_colour", "learned + colour verification", "ycbv (kinect depth)"),
+    ("learned_ideal_colour", "learned + colour verification", "ycbv_ideal (ideal depth)"),
     ("ransac_icp", "RANSAC + ICP", ""),
     ("fgr_icp", "FGR + ICP", ""),
     ("super4pcs_icp", "Super4PCS + ICP", ""),
+)
+
+
+#: The kinect / ideal-depth pairs of :data:`REAL_METHODS` (the same network architecture and training, the
+#: same stage after it), for the write-up's sensor sentence: ``(kinect key, ideal key, what follows the net)``.
+SENSOR_PAIRS = (
+    ("learned", "learned_ideal", "alone"),
+    ("learned_it2", "learned_ideal_it2", "after 2 refinement iterations (each network with its own refiner)"),
+    ("learned_icp", "learned_ideal_icp", "after ICP"),
+    ("learned_colour", "learned_ideal_colour", "after colour verification"),
 )
 
 
@@ -688,10 +700,11 @@ def beyond_findings(results_dir: str | Path, profile: str, name: str = "ycbv") -
             s += (f"; its ADD-S AUC, which rewards every millimetre, is {auc['learned']:.2f}, "
                   f"{_cmp(auc['learned'] - auc['learned_ideal'])} the ideal-depth network's ({auc['learned_ideal']:.2f})")
         s += "."
-        if acc["learned_it2"] is not None and acc["learned_ideal_it2"] is not None:
-            s += (f" After 2 refinement iterations (each network with its own refiner) the kinect pair scores "
-                  f"{acc['learned_it2']:.2f} %, {_cmp(acc['learned_it2'] - acc['learned_ideal_it2'])} the ideal-depth "
-                  f"pair ({acc['learned_ideal_it2']:.2f} %).")
+        pairs = [(label, acc[k], acc[k_ideal]) for k, k_ideal, label in SENSOR_PAIRS[1:]
+                 if acc[k] is not None and acc[k_ideal] is not None]
+        if pairs:
+            s += " With the same stage after each network, the kinect pair scores " + "; ".join(
+                f"{a:.2f} % {label}, {_cmp(a - b)} the ideal-depth pair ({b:.2f} %)" for label, a, b in pairs) + "."
         out["sensor"] = s
     else:
         out["sensor"] = ""
