@@ -47,6 +47,10 @@ YCBV       := no           no           yes          yes
 # the machine
 YCBV_POSE_cpu   := --profile cpu --epochs 6 --set time_budget=0
 YCBV_POSE_paper := --profile paper
+# the kinect / ideal-depth pair trained twice as long (cpu: 12 epochs, 3,600 steps, about 32 CPU-minutes
+# each; paper: the paper profile again, so the same networks)
+YCBV_POSE_LONG_cpu   := --profile cpu --epochs 12 --set time_budget=0
+YCBV_POSE_LONG_paper := --profile paper
 
 # ---- the column of $(PROFILE) ----
 _IDX := $(strip $(foreach i,1 2 3 4 5 6 7 8,$(if $(filter $(PROFILE),$(word $(i),$(PROFILES))),$(i))))

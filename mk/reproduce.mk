@@ -122,6 +122,13 @@ JITTER := --set colour_jitter=0.3
 $(foreach r,$(YCBV_RUNS),$(eval $(RUNS)/$(r)/model.pt: $(DATA_$(r))/manifest.json | $(VENV_OK) ; \
 	$(SIXDPOSE) train-pose --data $(DATA_$(r)) --out $$(@D) --no-progress \
 	  $$(if $$(wildcard $$(@D)/last.pt),--resume,$(YCBV_POSE_$(PROFILE)) $(if $(findstring jitter,$(r)),$(JITTER)))))
+# the same two networks trained twice as long (12 epochs, 3,600 steps: YCBV_POSE_LONG_$(PROFILE)), without refiners
+YCBV_LONG_RUNS := pose_ycbv_e12 pose_ycbv_ideal_e12
+DATA_pose_ycbv_e12 := data/ycbv
+DATA_pose_ycbv_ideal_e12 := data/ycbv_ideal
+$(foreach r,$(YCBV_LONG_RUNS),$(eval $(RUNS)/$(r)/model.pt: $(DATA_$(r))/manifest.json | $(VENV_OK) ; \
+	$(SIXDPOSE) train-pose --data $(DATA_$(r)) --out $$(@D) --no-progress \
+	  $$(if $$(wildcard $$(@D)/last.pt),--resume,$(YCBV_POSE_LONG_$(PROFILE)))))
 # the refiners of the two networks without jitter (the paper's learned method is the network + 2 iterations)
 $(foreach r,pose_ycbv pose_ycbv_ideal,$(eval $(RUNS)/$(subst pose,refiner,$(r))/model.pt: $(RUNS)/$(r)/model.pt \
 	$(DATA_$(r))/manifest.json | $(VENV_OK) ; \
@@ -136,13 +143,15 @@ YCBV_CMD_learned_ideal        := predict-pose --pose $(RUNS)/pose_ycbv_ideal
 YCBV_CMD_learned_ideal_it2    := predict-pose --pose $(RUNS)/pose_ycbv_ideal --refiner $(RUNS)/refiner_ycbv_ideal --iterations 2
 YCBV_CMD_learned_ideal_icp    := predict-pose --pose $(RUNS)/pose_ycbv_ideal --icp
 YCBV_CMD_learned_ideal_colour := predict-pose --pose $(RUNS)/pose_ycbv_ideal --colour-verify
+YCBV_CMD_learned_e12          := predict-pose --pose $(RUNS)/pose_ycbv_e12
+YCBV_CMD_learned_ideal_e12    := predict-pose --pose $(RUNS)/pose_ycbv_ideal_e12
 YCBV_CMD_learned_jitter       := predict-pose --pose $(RUNS)/pose_ycbv_jitter
 YCBV_CMD_learned_ideal_jitter := predict-pose --pose $(RUNS)/pose_ycbv_ideal_jitter
 YCBV_CMD_ransac_icp           := register --method ransac --icp --workers $(WORKERS) --min-px 0
 YCBV_CMD_fgr_icp              := register --method fgr --icp --workers $(WORKERS) --min-px 0
 YCBV_CMD_super4pcs_icp        := register --method super4pcs --icp --workers $(WORKERS) --min-px 0
 YCBV_METHODS := learned learned_it2 learned_icp learned_colour learned_ideal learned_ideal_it2 learned_ideal_icp \
-	learned_ideal_colour learned_jitter learned_ideal_jitter ransac_icp fgr_icp super4pcs_icp
+	learned_ideal_colour learned_e12 learned_ideal_e12 learned_jitter learned_ideal_jitter ransac_icp fgr_icp super4pcs_icp
 # the model.pt of every run a command names (--pose, --refiner)
 _ycbv_needs = $(foreach w,$(filter $(RUNS)/%,$(YCBV_CMD_$(1))),$(w)/model.pt)
 define ycbv_rule
@@ -154,7 +163,7 @@ $(RES)/$(YCBV_NAME)_gt_$(1).json: $(POSES)/$(YCBV_NAME)_gt_$(1).csv | $(VENV_OK)
 	  --results $$< --no-progress --all-images --label $(YCBV_NAME)_gt_$(1) --result-name $(YCBV_NAME)_gt_$(1) --results-dir $(RES)
 endef
 $(foreach m,$(YCBV_METHODS),$(eval $(call ycbv_rule,$(m))))
-YCBV_STAGES := $(foreach r,$(YCBV_RUNS) refiner_ycbv refiner_ycbv_ideal,$(RUNS)/$(r)/model.pt)
+YCBV_STAGES := $(foreach r,$(YCBV_RUNS) refiner_ycbv refiner_ycbv_ideal $(YCBV_LONG_RUNS),$(RUNS)/$(r)/model.pt)
 YCBV_RESULTS := $(foreach m,$(YCBV_METHODS),$(RES)/$(YCBV_NAME)_gt_$(m).json)
 NB09_ARGS := -p TRAIN_DATA ../data/ycbv -p POSE_RUN ../$(RUNS)/pose_ycbv -p REFINER_RUN ../$(RUNS)/refiner_ycbv \
 	-p IDEAL_RUN ../$(RUNS)/pose_ycbv_ideal -p POSE_PROFILE $(P_POSE)

@@ -39,15 +39,18 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
     # a new run gets the profile; an interrupted one (last.pt in this checkout) is resumed
     assert out.split(seg_line, 1)[1].lstrip().startswith((f"--profile {seg}", "--resume")) or "--resume" in seg_line
     assert len(_lines(out, "segment")) == 2
-    ycbv = profile in ("cpu", "paper")  # the synthetic-to-real branch: ycbv data, 4 networks + 2 refiners, 13 methods on real frames
+    ycbv = profile in ("cpu", "paper")  # the synthetic-to-real branch: ycbv data, 6 networks + 2 refiners, 15 methods on real frames
     poses = [line for line in _lines(out, "register") + _lines(out, "predict-pose") if "ycbv_sample" not in line]
     real = [line for line in _lines(out, "register") + _lines(out, "predict-pose") if "--data ../shared/data/ycbv_sample" in line]
     evals = [line for line in _lines(out, "evaluate") if "ycbv_sample" not in line]
     assert len(poses) == 40 and len(evals) == 40  # 10 methods x 2 splits x 2 mask sources
-    assert len(real) == (13 if ycbv else 0) and len(_lines(out, "evaluate")) == len(evals) + len(real)
+    assert len(real) == (15 if ycbv else 0) and len(_lines(out, "evaluate")) == len(evals) + len(real)
     assert ({"data/ycbv", "data/ycbv_ideal"} <= gen) == ycbv
-    assert len([line for line in _lines(out, "train-pose") if "pose_ycbv" in line]) == (4 if ycbv else 0)
+    assert len([line for line in _lines(out, "train-pose") if "pose_ycbv" in line]) == (6 if ycbv else 0)
     assert len([line for line in _lines(out, "train-refiner") if "refiner_ycbv" in line]) == (2 if ycbv else 0)
+    long = [line for line in _lines(out, "train-pose") if "_e12" in line]  # the pair trained twice as long
+    assert len(long) == (2 if ycbv else 0) and all(
+        ("--epochs 12" in line) == (profile == "cpu") or "--resume" in line for line in long)
     assert all(f"--results-dir results/{profile}" in line for line in _lines(out, "evaluate"))
     assert sum("--masks gt --min-px 400" in line for line in poses) == 12
     assert len(re.findall(r"-m papermill .*notebooks/0\d_\w+\.ipynb notebooks/executed/" + profile, out)) == 9
