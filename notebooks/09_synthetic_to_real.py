@@ -90,7 +90,10 @@ methods = {"learned (ycbv, kinect depth)": learned_method(POSE_RUN),
            "learned + ICP": learned_method(POSE_RUN, icp=True),
            "learned + colour verification": learned_method(POSE_RUN, colour_verify=True)}
 if IDEAL_RUN and Path(IDEAL_RUN, "model.pt").is_file():
+    # the same network trained on ideal depth, with the same stages after it (the sensor model's pairs)
     methods["learned, ideal-depth training data"] = learned_method(IDEAL_RUN)
+    methods["learned + ICP, ideal-depth training data"] = learned_method(IDEAL_RUN, icp=True)
+    methods["learned + colour verification, ideal-depth training data"] = learned_method(IDEAL_RUN, colour_verify=True)
 methods.update(hybrid_methods(workers=WORKERS, methods=("ransac", "super4pcs"), icp=(True,)))
 table, runs = compare_methods(real, methods, {"gt": ("gt", list(range(len(real)))[:MAX_IMAGES])}, min_px=0, bop=True,
                               also=[("ADD-S (all)", every_symmetric)])
