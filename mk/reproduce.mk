@@ -112,23 +112,15 @@ YCBV_DATASETS := ycbv ycbv_ideal
 $(foreach g,$(YCBV_DATASETS),$(eval data/$(g)/manifest.json: | $(VENV_OK) ; \
 	$(SIXDPOSE) generate --profile $(g) --out data/$(g) --workers $(WORKERS) --no-progress))
 DATASETS += $(YCBV_DATASETS)
-# run -> its training data and extra train-pose arguments
-YCBV_RUNS := pose_ycbv pose_ycbv_ideal pose_ycbv_jitter pose_ycbv_ideal_jitter
-DATA_pose_ycbv := data/ycbv
-DATA_pose_ycbv_jitter := data/ycbv
-DATA_pose_ycbv_ideal := data/ycbv_ideal
-DATA_pose_ycbv_ideal_jitter := data/ycbv_ideal
+# run -> its training data and extra train-pose arguments: YCBV_POSE_$(PROFILE), or YCBV_POSE_LONG_$(PROFILE)
+# for the pair trained twice as long (_e12, no refiners), plus colour jitter for the _jitter pair
+YCBV_RUNS := pose_ycbv pose_ycbv_ideal pose_ycbv_jitter pose_ycbv_ideal_jitter pose_ycbv_e12 pose_ycbv_ideal_e12
+$(foreach r,$(YCBV_RUNS),$(eval DATA_$(r) := data/$(if $(findstring ideal,$(r)),ycbv_ideal,ycbv)))
 JITTER := --set colour_jitter=0.3
+_ycbv_args = $(if $(findstring _e12,$(1)),$(YCBV_POSE_LONG_$(PROFILE)),$(YCBV_POSE_$(PROFILE))) $(if $(findstring jitter,$(1)),$(JITTER))
 $(foreach r,$(YCBV_RUNS),$(eval $(RUNS)/$(r)/model.pt: $(DATA_$(r))/manifest.json | $(VENV_OK) ; \
 	$(SIXDPOSE) train-pose --data $(DATA_$(r)) --out $$(@D) --no-progress \
-	  $$(if $$(wildcard $$(@D)/last.pt),--resume,$(YCBV_POSE_$(PROFILE)) $(if $(findstring jitter,$(r)),$(JITTER)))))
-# the same two networks trained twice as long (12 epochs, 3,600 steps: YCBV_POSE_LONG_$(PROFILE)), without refiners
-YCBV_LONG_RUNS := pose_ycbv_e12 pose_ycbv_ideal_e12
-DATA_pose_ycbv_e12 := data/ycbv
-DATA_pose_ycbv_ideal_e12 := data/ycbv_ideal
-$(foreach r,$(YCBV_LONG_RUNS),$(eval $(RUNS)/$(r)/model.pt: $(DATA_$(r))/manifest.json | $(VENV_OK) ; \
-	$(SIXDPOSE) train-pose --data $(DATA_$(r)) --out $$(@D) --no-progress \
-	  $$(if $$(wildcard $$(@D)/last.pt),--resume,$(YCBV_POSE_LONG_$(PROFILE)))))
+	  $$(if $$(wildcard $$(@D)/last.pt),--resume,$(call _ycbv_args,$(r)))))
 # the refiners of the two networks without jitter (the paper's learned method is the network + 2 iterations)
 $(foreach r,pose_ycbv pose_ycbv_ideal,$(eval $(RUNS)/$(subst pose,refiner,$(r))/model.pt: $(RUNS)/$(r)/model.pt \
 	$(DATA_$(r))/manifest.json | $(VENV_OK) ; \
@@ -163,7 +155,7 @@ $(RES)/$(YCBV_NAME)_gt_$(1).json: $(POSES)/$(YCBV_NAME)_gt_$(1).csv | $(VENV_OK)
 	  --results $$< --no-progress --all-images --label $(YCBV_NAME)_gt_$(1) --result-name $(YCBV_NAME)_gt_$(1) --results-dir $(RES)
 endef
 $(foreach m,$(YCBV_METHODS),$(eval $(call ycbv_rule,$(m))))
-YCBV_STAGES := $(foreach r,$(YCBV_RUNS) refiner_ycbv refiner_ycbv_ideal $(YCBV_LONG_RUNS),$(RUNS)/$(r)/model.pt)
+YCBV_STAGES := $(foreach r,$(YCBV_RUNS) refiner_ycbv refiner_ycbv_ideal,$(RUNS)/$(r)/model.pt)
 YCBV_RESULTS := $(foreach m,$(YCBV_METHODS),$(RES)/$(YCBV_NAME)_gt_$(m).json)
 NB09_ARGS := -p TRAIN_DATA ../data/ycbv -p POSE_RUN ../$(RUNS)/pose_ycbv -p REFINER_RUN ../$(RUNS)/refiner_ycbv \
 	-p IDEAL_RUN ../$(RUNS)/pose_ycbv_ideal -p POSE_PROFILE $(P_POSE)
