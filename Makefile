@@ -1,6 +1,7 @@
 # sixdpose: make targets are the dependency graph of the project.
 #   make setup      system packages (as root) + .venv from uv.lock; WITH_LATEX=1 adds LaTeX (for `make paper`)
 #   make test       everything CI runs: unit/integration tests, then the smoke graph (every notebook on the smoke profile)
+#   make lint       ruff check (clean) and the mypy error count (tools/mypy_baseline.txt, may not grow)
 #   make test-fast  the edit loop: tests without Drake generation or slow training (under 2 minutes)
 #   make demo       the whole graph at laptop scale (= make reproduce PROFILE=demo): every table, figure, the PDF
 #   make reproduce  the graph of mk/reproduce.mk for PROFILE (paper by default: GPU machine, 25,000 images);
@@ -37,7 +38,7 @@ PROFILE ?= paper
 include mk/profiles.mk
 include mk/reproduce.mk
 
-.PHONY: setup apt venv test test-fast notebooks-sync demo smoke reproduce evaluations ycbv paper tables benchmark results-readme \
+.PHONY: setup apt venv lint test test-fast notebooks-sync demo smoke reproduce evaluations ycbv paper tables benchmark results-readme \
 	results-check
 .DELETE_ON_ERROR:
 
@@ -68,9 +69,14 @@ $(VENV)/.synced: pyproject.toml uv.lock
 
 # CI: the tests, then the smoke graph (every notebook executed by papermill on the smoke profile, on
 # top of the smoke graph's datasets, runs and results)
-test: setup
+test: setup lint
 	$(PY) -m pytest -p no:dash -q tests
 	$(MAKE) --no-print-directory smoke
+
+# ruff (rules in pyproject.toml) must be clean; mypy's error count may not grow past tools/mypy_baseline.txt
+lint: setup
+	$(VENV)/bin/ruff check .
+	$(PY) tools/mypy_gate.py
 
 test-fast: setup
 	$(PY) -m pytest -p no:dash -q -m "not slow and not drake" tests
