@@ -51,7 +51,7 @@ def main(argv=None) -> int:
     add_result_arguments(ap, None, Path(__file__).resolve().parents[1] / "results", "registration_<data dir name>")
     args = ap.parse_args(argv)
 
-    from sixdpose.datasets.base import open_dataset
+    from sixdpose.datasets import open_dataset
     from sixdpose.evaluation.evaluate import evaluate
     from sixdpose.registration.presets import get_preset
     from sixdpose.registration.runner import run_registration

@@ -36,7 +36,7 @@ def _parse_variant(text: str) -> tuple[str, dict]:
 
 def _run(job):
     data, split, method, icp, preset, name, kw, stride, min_px = job
-    from sixdpose.datasets.base import open_dataset
+    from sixdpose.datasets import open_dataset
     from sixdpose.evaluation.evaluate import evaluate
     from sixdpose.registration.presets import get_preset
     from sixdpose.registration.runner import run_registration

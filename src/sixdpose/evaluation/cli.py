@@ -31,14 +31,14 @@ def register(sub) -> None:
     g.add_argument("--result-name", default=None, metavar="NAME",
                    help="also write the summary and the per-object table, with commit, date, hardware and this "
                         "command line, as the result artifact RESULTS_DIR/NAME.json (+ .csv); README tables are "
-                        "generated from these (python -m sixdpose.artifacts.readme)")
+                        "generated from these (python -m sixdpose.reporting.readme)")
     g.add_argument("--results-dir", default="results", help="directory of result artifacts (default: results)")
     p.set_defaults(func=_run)
 
 
 def _run(args) -> int:
     from ..artifacts.poses import read_results
-    from ..datasets.base import open_dataset
+    from ..datasets.readers import open_dataset
     from ..fileio import claim_output_dir
     from .evaluate import evaluate, write_tables
 
@@ -52,7 +52,7 @@ def _run(args) -> int:
     ests = read_results(res_path)
     kw = {}
     if args.symmetric_ids:
-        from ..cli import UserError
+        from ..errors import UserError
 
         try:
             kw["symmetric_ids"] = [int(x) for x in args.symmetric_ids.split(",") if x.strip()]
@@ -60,7 +60,7 @@ def _run(args) -> int:
             raise UserError(f"--symmetric-ids: expected comma-separated integers, got {args.symmetric_ids!r}") from None
     ds = open_dataset(args.data, split=args.split, **kw)
     if args.limit < 0:
-        from ..cli import UserError
+        from ..errors import UserError
 
         raise UserError(f"--limit: expected N >= 0 images, got {args.limit}")
     images = ds.keys()[: args.limit] if args.limit else (ds.keys() if args.all_images else None)

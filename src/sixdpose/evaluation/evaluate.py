@@ -26,7 +26,8 @@ import numpy as np
 
 from ..artifacts.poses import PoseEstimate
 from ..artifacts.tables import write_table
-from ..datasets.base import DatasetReader, as_reader
+from ..datasets.base import DatasetReader
+from ..datasets.readers import as_reader
 from ..errors import SixdposeError
 from ..fileio import atomic_write_json
 from . import bop as bop_scores

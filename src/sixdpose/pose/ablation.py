@@ -50,7 +50,7 @@ def run_ablation(train, val, out_dir, *, profile: str = "cpu", time_budget: floa
     """
     import pandas as pd
 
-    from ..datasets.base import as_reader
+    from ..datasets.readers import as_reader
     from ..evaluation.evaluate import evaluate
     from .checkpoint import load
     from .infer import predict_dataset

@@ -271,7 +271,7 @@ def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: 
     Raises:
         PredictionError (a corrupt prediction file, named), CheckpointError, PoseError, DatasetError.
     """
-    from ..datasets.base import as_reader
+    from ..datasets.readers import as_reader
 
     reader = as_reader(data, split=split)
     est = estimator or Estimator(pose, refiner, iterations=iterations, device=device, icp=icp, colour_verify=colour_verify,

@@ -35,8 +35,8 @@ def _run(args) -> int:
 
     from ..artifacts.poses import RESULTS_HEADER, write_results
     from ..artifacts.tables import write_table
-    from ..cli import UserError
-    from ..datasets.base import open_dataset
+    from ..datasets.readers import open_dataset
+    from ..errors import UserError
     from ..fileio import claim_output_file
     from .presets import get_preset
     from .runner import run_registration

@@ -17,7 +17,8 @@ import numpy as np
 
 from ..artifacts.poses import PoseEstimate
 from ..artifacts.predictions import read_predictions
-from ..datasets.base import DatasetError, DatasetReader, as_reader, check_depth_scale
+from ..datasets.base import DatasetError, DatasetReader, check_depth_scale
+from ..datasets.readers import as_reader
 from ..errors import SixdposeError
 from .presets import RegistrationConfig
 

@@ -12,7 +12,7 @@ Input: a results directory of the ``make reproduce`` graph (``results/<profile>/
 Other result files in the directory (ablations, benchmarks) are ignored here. Every function is pure
 (results in, tables / figures / LaTeX text out) except the ``write_*`` ones, which write through
 :mod:`sixdpose.artifacts.tables` and :mod:`sixdpose.fileio`. The paper's own figures come from
-:mod:`sixdpose.paper` and always stand in a column labelled as the paper's.
+:mod:`sixdpose.reporting.paper` and always stand in a column labelled as the paper's.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from ..artifacts.results import Result, list_results, machine_text, read_result
 from ..artifacts.tables import tex_escape, write_table
 from ..errors import SixdposeError
 from ..fileio import atomic_write_text
-from ..paper import TABLES
+from .paper import TABLES
 
 
 class ReportError(SixdposeError):
@@ -346,9 +346,9 @@ def fig7(entry: Entry, root: str | Path = ".", n_good: int = 3, n_bad: int = 3, 
         (committed results whose runs were made on another machine).
     """
     from ..artifacts.poses import read_results
-    from ..datasets import open_dataset
-    from .evaluate import evaluate
-    from .visualize import plot_cases
+    from ..datasets.readers import open_dataset
+    from ..evaluation.evaluate import evaluate
+    from ..evaluation.visualize import plot_cases
 
     cfg = entry.result.config or {}
     data, csv = cfg.get("data"), cfg.get("results")

@@ -12,8 +12,9 @@ from dataclasses import dataclass
 from typing import Callable
 
 from ..artifacts.poses import PoseEstimate
-from ..datasets.base import DatasetReader, as_reader
-from .evaluate import EvalResult, evaluate
+from ..datasets.base import DatasetReader
+from ..datasets.readers import as_reader
+from ..evaluation.evaluate import EvalResult, evaluate
 
 #: The display name of each hybrid method (paper Tables I-III: "Ours Hybrid(RANSAC + ICP)" ...).
 HYBRID_NAMES = {"ransac": "RANSAC", "fgr": "FGR", "super4pcs": "Super4PCS"}
