@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..constants import ADD_THRESHOLD, MIN_VISIBLE_PX
+
 
 def register(sub) -> None:
     """Add the ``evaluate`` subcommand."""
@@ -13,8 +15,9 @@ def register(sub) -> None:
     p.add_argument("--results", required=True, help="BOP results CSV (from `sixdpose register`)")
     p.add_argument("--split", default="test", help="BOP split (ignored for the synthetic layout)")
     p.add_argument("--out", default=None, help="output directory (default: next to the results, <results>_eval)")
-    p.add_argument("--min-px", type=int, default=400, help="count GT instances with at least this many visible pixels")
-    p.add_argument("--threshold", type=float, default=0.1, help="correct if ADD(-S) < threshold x diameter")
+    p.add_argument("--min-px", type=int, default=MIN_VISIBLE_PX,
+                   help="count GT instances with at least this many visible pixels")
+    p.add_argument("--threshold", type=float, default=ADD_THRESHOLD, help="correct if ADD(-S) < threshold x diameter")
     p.add_argument("--symmetric-ids", default=None,
                    help="BOP only: comma-separated obj_ids to treat as symmetric (overrides models_info.json)")
     p.add_argument("--all-images", action="store_true",

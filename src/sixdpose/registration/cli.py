@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 
 from ..config import add_set_option, parse_overrides
+from ..constants import MIN_DETECTION_SCORE
 
 
 def register(sub) -> None:
@@ -24,8 +25,8 @@ def register(sub) -> None:
     p.add_argument("--limit", type=int, default=None, help="only the first N images")
     p.add_argument("--stride", type=int, default=1, help="only every N-th image (a fixed subset spread over the scenes)")
     p.add_argument("--min-px", type=int, default=0, help="with GT masks, skip instances with fewer visible pixels")
-    p.add_argument("--min-score", type=float, default=0.5,
-                   help="with predicted masks, skip detections whose score is below this (default 0.5)")
+    p.add_argument("--min-score", type=float, default=MIN_DETECTION_SCORE,
+                   help="with predicted masks, skip detections whose score is below this (default %(default)s)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_run)
 

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from ..artifacts.results import Result, list_results, machine_text, read_result
 from ..artifacts.tables import tex_escape, write_table
+from ..constants import ADD_THRESHOLD, MIN_VISIBLE_PX
 from ..errors import SixdposeError
 from ..fileio import atomic_write_text
 from .paper import TABLES
@@ -361,7 +362,8 @@ def fig7(entry: Entry, root: str | Path = ".", n_good: int = 3, n_bad: int = 3, 
     ds = open_dataset(data, split=cfg.get("split") or "test")
     keys = ds.keys()
     images = keys[: cfg["limit"]] if cfg.get("limit") else keys
-    res = evaluate(ds, read_results(csv), min_px=cfg.get("min_px", 400), threshold=cfg.get("threshold", 0.1), images=images)
+    res = evaluate(ds, read_results(csv), min_px=cfg.get("min_px", MIN_VISIBLE_PX),
+                   threshold=cfg.get("threshold", ADD_THRESHOLD), images=images)
     m = METHOD[entry.method]
     fig = plot_cases(ds, res, n_good=n_good, n_bad=n_bad, ncols=ncols,
                      title=f"{m.label}, {MASKS[entry.masks]}, {SPLITS[entry.split]} split: GT (green), estimate (red)")
