@@ -16,9 +16,8 @@ from ..constants import ADD_THRESHOLD, MIN_DETECTION_SCORE, MIN_VISIBLE_PX
 from ..datasets.base import DatasetReader
 from ..datasets.readers import as_reader
 from ..evaluation.evaluate import EvalResult, evaluate
+from ..registry import HYBRID_ALGORITHMS
 
-#: The display name of each hybrid method (paper Tables I-III: "Ours Hybrid(RANSAC + ICP)" ...).
-HYBRID_NAMES = {"ransac": "RANSAC", "fgr": "FGR", "super4pcs": "Super4PCS"}
 
 
 @dataclass
@@ -47,7 +46,7 @@ def hybrid_methods(cfg=None, workers: int = 2, methods=("ransac", "fgr", "super4
                 return run_registration(reader, m, icp=use_icp, masks=masks, cfg=cfg, workers=workers, indices=indices,
                                         min_px=MIN_VISIBLE_PX if masks == "gt" else 0, progress=False)
 
-            out[f"Hybrid ({HYBRID_NAMES[m]}{' + ICP' if use_icp else ''})"] = run
+            out[f"Hybrid ({HYBRID_ALGORITHMS[m]}{' + ICP' if use_icp else ''})"] = run
     return out
 
 
