@@ -105,7 +105,8 @@ REAL_METHODS: tuple[RealMethod, ...] = (
                "predict-pose --pose {runs}/pose_ycbv_ideal --colour-verify"),
     RealMethod("ransac_icp", "RANSAC + ICP", "", "register --method ransac --icp --workers {workers} --min-px 0"),
     RealMethod("fgr_icp", "FGR + ICP", "", "register --method fgr --icp --workers {workers} --min-px 0"),
-    RealMethod("super4pcs_icp", "Super4PCS + ICP", "", "register --method super4pcs --icp --workers {workers} --min-px 0"),
+    RealMethod("super4pcs_icp", "Super4PCS + ICP", "",
+               "register --method super4pcs --icp --workers {workers} --min-px 0"),
 )
 
 #: The profiles of the ``make reproduce`` graph (mk/profiles.mk ``PROFILES``), smallest first.

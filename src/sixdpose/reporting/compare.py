@@ -19,7 +19,6 @@ from ..evaluation.evaluate import EvalResult, evaluate
 from ..registry import HYBRID_ALGORITHMS
 
 
-
 @dataclass
 class Run:
     """One method on one mask source: its rows and their evaluation."""
