@@ -12,6 +12,7 @@ from pathlib import Path
 from ..config import add_set_option, parse_overrides
 from ..constants import MIN_DETECTION_SCORE, MIN_VISIBLE_PX
 from ..logs import setup_logging
+from ..registry import STAGE_PROFILES
 
 
 def _overrides(args) -> dict:
@@ -121,7 +122,7 @@ def _cmd_ablation(args) -> int:
 def _train_args(p, refiner: bool) -> None:
     p.add_argument("--data", required=True, help="training dataset (synthetic layout or BOP root), e.g. data/train")
     p.add_argument("--out", required=True, help="run directory (config.json, metrics.csv, last.pt, model.pt)")
-    p.add_argument("--profile", choices=("smoke", "cpu", "paper"), default=None,
+    p.add_argument("--profile", choices=STAGE_PROFILES, default=None,
                    help="named config (default smoke; on --resume: the run's)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its last completed epoch")
     p.add_argument("--val", default=None, help="validation dataset scored every epoch (ADD(-S) %% into metrics.csv), e.g. data/val")
@@ -184,7 +185,7 @@ def register(subparsers) -> None:
     p.add_argument("--train", required=True, help="training dataset, e.g. data/train")
     p.add_argument("--val", required=True, help="held-out dataset the variants are scored on, e.g. data/val (never test)")
     p.add_argument("--out", required=True, help="directory of the variants' runs")
-    p.add_argument("--profile", choices=("smoke", "cpu", "paper"), default="cpu", help="base PoseConfig profile")
+    p.add_argument("--profile", choices=STAGE_PROFILES, default="cpu", help="base PoseConfig profile")
     p.add_argument("--epochs", type=int, default=None, help="epochs per variant (equal steps; time budget off)")
     p.add_argument("--time-budget", dest="time_budget", type=float, default=None, help="seconds of training per variant (equal time)")
     p.add_argument("--variants", default=None, help="comma-separated variant indices (default: all)")
