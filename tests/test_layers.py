@@ -444,6 +444,13 @@ def test_mk_method_lists_are_the_registry():
     assert MK["ALL_LEARNED"].split() == [m.key for m in registry.METHODS if m.kind == "learned"]
     assert MK["FEW_METHODS"].split() == [m.key for m in registry.METHODS if m.few]
     assert {m.kind for m in registry.METHODS} == {"hybrid", "learned"}
+    from sixdpose.registration import METHODS as ALGORITHMS
+
+    assert tuple(registry.HYBRID_ALGORITHMS) == ALGORITHMS
+    for m in registry.METHODS + registry.REAL_METHODS:
+        if m.kind == "hybrid":
+            words = m.command.split()
+            assert words[words.index("--method") + 1] in registry.HYBRID_ALGORITHMS, m.key
 
 
 @pytest.mark.parametrize("method", registry.METHODS, ids=lambda m: m.key)

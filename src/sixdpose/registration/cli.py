@@ -6,6 +6,7 @@ import logging
 
 from ..config import add_set_option, parse_overrides
 from ..constants import MIN_DETECTION_SCORE
+from ..registry import HYBRID_ALGORITHMS
 
 
 def register(sub) -> None:
@@ -14,7 +15,7 @@ def register(sub) -> None:
                        description="Register every instance of a dataset split; write a BOP results CSV and, "
                                    "beside it, <out>.config.yml (the parameters used).")
     p.add_argument("--data", required=True, help="dataset directory (synthetic layout or BOP root)")
-    p.add_argument("--method", required=True, choices=["ransac", "fgr", "super4pcs"])
+    p.add_argument("--method", required=True, choices=list(HYBRID_ALGORITHMS))
     p.add_argument("--icp", action="store_true", help="refine with ICP (point-to-plane by default)")
     p.add_argument("--masks", default="gt", help="'gt' or a directory of predicted masks (<scene>_<im>.npz)")
     p.add_argument("--split", default="test", help="BOP split (ignored for the synthetic layout)")

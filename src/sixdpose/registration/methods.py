@@ -22,10 +22,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry import X_from
+from ..registry import HYBRID_ALGORITHMS
 from .geometry import Reference, ReferenceCache, compute_fpfh, estimate_normals, to_o3d
 from .presets import RegistrationConfig
 
-METHODS = ("ransac", "fgr", "super4pcs")
+#: The global registration algorithms (:data:`sixdpose.registry.HYBRID_ALGORITHMS`).
+METHODS = tuple(HYBRID_ALGORITHMS)
 
 
 @dataclass

@@ -29,7 +29,7 @@ class Run:
     result: EvalResult
 
 
-def hybrid_methods(cfg=None, workers: int = 2, methods=("ransac", "fgr", "super4pcs"), icp=(False, True)) -> dict[str, Callable]:
+def hybrid_methods(cfg=None, workers: int = 2, methods=tuple(HYBRID_ALGORITHMS), icp=(False, True)) -> dict[str, Callable]:
     """The hybrid methods as ``{display name: run(reader, masks, indices)}``.
 
     Args:
