@@ -117,9 +117,9 @@ BENCHMARKS := generation segmentation registration colour_robustness
 benchmark: setup
 	@for b in $(BENCHMARKS); do echo "== benchmarks/$$b.py"; $(PY) benchmarks/$$b.py || exit 1; done
 
-# README blocks between <!-- results:NAME --> markers are generated from results/*.json (sixdpose.artifacts.readme)
+# README blocks between <!-- results:NAME --> markers are generated from results/*.json (sixdpose.reporting.readme)
 results-readme: setup
-	$(PY) -m sixdpose.artifacts.readme --readme README.md --results results
+	$(PY) -m sixdpose.reporting.readme --readme README.md --results results
 
 results-check: setup
-	$(PY) -m sixdpose.artifacts.readme --readme README.md --results results --check
+	$(PY) -m sixdpose.reporting.readme --readme README.md --results results --check

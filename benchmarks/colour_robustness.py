@@ -24,6 +24,8 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from sixdpose.constants import MIN_VISIBLE_PX  # noqa: E402
+
 
 class PerturbedColours:
     """A :class:`~sixdpose.datasets.base.DatasetReader` whose samples' RGB is perturbed, reproducibly
@@ -88,17 +90,18 @@ def main(argv=None) -> int:
     table = []
     for label, reader, colour in (("rendered RGB", ds, True), ("perturbed RGB", perturbed, True), ("no colour step", ds, False)):
         rows = run_registration(reader, args.method, icp=True, cfg=get_preset("default", colour_verify=colour),
-                                workers=1, min_px=400, progress=False, indices=idx)
-        res = evaluate(ds, rows, min_px=400)
+                                workers=1, min_px=MIN_VISIBLE_PX, progress=False, indices=idx)
+        res = evaluate(ds, rows, min_px=MIN_VISIBLE_PX)
         print(f"{args.method}+icp  {label:16s} ADD(-S) {res.accuracy:6.2f}% ({res.n_correct}/{res.n_gt})", flush=True)
         table.append({"condition": label, "method": args.method + "+icp", "colour_step": colour,
                       "add_s_accuracy": res.accuracy, "n_correct": res.n_correct, "n_gt": res.n_gt})
     save_from_args(args, table, command=script_command(__file__, argv),
                    units={"add_s_accuracy": "%", "n_correct": "GT instances", "n_gt": "GT instances"},
-                   description=f"{args.method} + ICP (default preset, GT masks, >= 400 px, one thread) on every "
+                   description=f"{args.method} + ICP (default preset, GT masks, >= {MIN_VISIBLE_PX} px, one thread) "
+                               f"on every "
                                f"{args.stride}-th image of {Path(str(data)).name}: rendered RGB, perturbed RGB "
                                f"(gain 0.75-1.25, gamma 0.8-1.25, noise 6/255), no colour step",
-                   config={"data": str(data), "stride": args.stride, "method": args.method, "min_px": 400,
+                   config={"data": str(data), "stride": args.stride, "method": args.method, "min_px": MIN_VISIBLE_PX,
                            "preset": get_preset("default").to_dict()})
     return 0
 

@@ -165,7 +165,7 @@ def inference_fps(pose, refiner, device, instances: int, frames: int) -> dict:
 def end_to_end_fps(seg, pose, refiner, data, device, frames: int) -> dict:
     """Frames per second of segmentation + pose + 2 refinement iterations on a dataset's first frames."""
     from sixdpose.artifacts.predictions import Detection
-    from sixdpose.datasets.base import as_reader
+    from sixdpose.datasets import as_reader
     from sixdpose.segmentation.infer import Segmenter
 
     reader = as_reader(data, split="test")

@@ -31,6 +31,8 @@ import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+from sixdpose.constants import MIN_VISIBLE_PX  # noqa: E402
+
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -42,7 +44,7 @@ def main(argv=None) -> int:
                     help="image stride of the paper preset (default 4 x --stride: it is several times slower)")
     ap.add_argument("--methods", default="ransac,fgr,super4pcs")
     ap.add_argument("--presets", default="default,paper")
-    ap.add_argument("--min-px", type=int, default=400)
+    ap.add_argument("--min-px", type=int, default=MIN_VISIBLE_PX)
     ap.add_argument("--csv", default=None, help="also write the table as CSV here")
     ap.add_argument("--symmetric-ids", default=None,
                     help="BOP only: comma-separated obj_ids treated as symmetric (for files without annotations)")
@@ -51,7 +53,7 @@ def main(argv=None) -> int:
     add_result_arguments(ap, None, Path(__file__).resolve().parents[1] / "results", "registration_<data dir name>")
     args = ap.parse_args(argv)
 
-    from sixdpose.datasets.base import open_dataset
+    from sixdpose.datasets import open_dataset
     from sixdpose.evaluation.evaluate import evaluate
     from sixdpose.registration.presets import get_preset
     from sixdpose.registration.runner import run_registration

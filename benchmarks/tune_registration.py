@@ -26,6 +26,8 @@ import multiprocessing as mp  # noqa: E402
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+from sixdpose.constants import MIN_VISIBLE_PX  # noqa: E402
+
 
 def _parse_variant(text: str) -> tuple[str, dict]:
     from sixdpose.config import parse_overrides
@@ -36,7 +38,7 @@ def _parse_variant(text: str) -> tuple[str, dict]:
 
 def _run(job):
     data, split, method, icp, preset, name, kw, stride, min_px = job
-    from sixdpose.datasets.base import open_dataset
+    from sixdpose.datasets import open_dataset
     from sixdpose.evaluation.evaluate import evaluate
     from sixdpose.registration.presets import get_preset
     from sixdpose.registration.runner import run_registration
@@ -59,7 +61,7 @@ def main(argv=None) -> int:
     ap.add_argument("--preset", default="default")
     ap.add_argument("--variant", action="append", default=[], help="NAME:field=value,... (repeatable)")
     ap.add_argument("--stride", type=int, default=5)
-    ap.add_argument("--min-px", type=int, default=400)
+    ap.add_argument("--min-px", type=int, default=MIN_VISIBLE_PX)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--csv", default=None)
     from sixdpose.artifacts.results import add_result_arguments, save_from_args, script_command

@@ -3,7 +3,7 @@
 #
 # Every hybrid method (RANSAC, FGR, Super4PCS; with and without ICP) on the test split, with ground-truth
 # masks and with the masks notebook 03 predicted on its held-out images (`PRED_DIR`). The loop lives in
-# `sixdpose.evaluation.compare.compare_methods`; the methods in `sixdpose.registration`.
+# `sixdpose.reporting.compare.compare_methods`; the methods in `sixdpose.registration`.
 
 # %% tags=["parameters"]
 # Parameters: plain values only (papermill overrides them). None means "from the environment / the profile",
@@ -32,10 +32,10 @@ import matplotlib.pyplot as plt
 from sixdpose.artifacts.predictions import list_predictions
 from sixdpose.artifacts.tables import write_table
 from sixdpose.datasets import open_dataset
-from sixdpose.evaluation.compare import compare_methods, hybrid_methods
 from sixdpose.evaluation.visualize import plot_cases
 from sixdpose.generation import ensure_dataset
 from sixdpose.registration import get_preset
+from sixdpose.reporting.compare import compare_methods, hybrid_methods
 
 ensure_dataset(DATA, profile=PROFILE)
 ds = open_dataset(DATA, split=SPLIT)

@@ -6,9 +6,9 @@
 # date and machine. Splits: `test` (held-out, objects may repeat: the paper's multi-instance problem) and
 # `single` (held-out, no repeated object: the paper's section V-D subset, the setting of its Table III);
 # `lmo` (LINEMOD-Occlusion, Table I) when the graph ran with `LMO=/path/to/lmo`. Masks: `gt` or `pred`
-# (the graph's Mask R-CNN). The paper's figures (`sixdpose.paper`) stand in columns labelled as the paper's.
+# (the graph's Mask R-CNN). The paper's figures (`sixdpose.reporting.paper`) stand in columns labelled as the paper's.
 # The tables go to `FIGURES` (CSV) and `TEX` (LaTeX, with the macro file of the write-up in `paper/`).
-# The logic lives in `sixdpose.evaluation.report`.
+# The logic lives in `sixdpose.reporting.report`.
 
 # %% tags=["parameters"]
 # Parameters: plain values only (papermill overrides them). None means "from the environment / the profile",
@@ -35,7 +35,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import pandas as pd
 
-from sixdpose.evaluation import report
+from sixdpose.reporting import report
 
 figures, tex = Path(FIGURES), Path(TEX)
 figures.mkdir(parents=True, exist_ok=True)

@@ -34,9 +34,9 @@ import matplotlib.pyplot as plt
 
 from sixdpose.artifacts.tables import write_table
 from sixdpose.datasets import open_dataset
-from sixdpose.evaluation.compare import compare_methods, hybrid_methods
 from sixdpose.evaluation.visualize import plot_cases
 from sixdpose.generation import ensure_dataset
+from sixdpose.reporting.compare import compare_methods, hybrid_methods
 
 figures = Path(FIGURES)
 figures.mkdir(parents=True, exist_ok=True)

@@ -49,11 +49,11 @@ import matplotlib.pyplot as plt
 
 from sixdpose.artifacts.tables import write_table
 from sixdpose.datasets import open_dataset
-from sixdpose.evaluation.compare import compare_methods, hybrid_methods, learned_method, per_object_table
 from sixdpose.evaluation.visualize import plot_cases
 from sixdpose.generation import ensure_dataset
 from sixdpose.pose.plots import plot_training
 from sixdpose.pose.train import ensure_trained
+from sixdpose.reporting.compare import compare_methods, hybrid_methods, learned_method, per_object_table
 
 figures = Path(FIGURES)
 figures.mkdir(parents=True, exist_ok=True)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from sixdpose.cli import main
-from sixdpose.datasets.base import DatasetError, open_dataset
+from sixdpose.datasets import DatasetError, open_dataset
 from sixdpose.datasets.bop import BopDataset
 from test_reg_helpers import LMO, YCBV, write_synthetic_dataset
 

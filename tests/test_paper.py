@@ -109,7 +109,7 @@ def test_the_write_up_builds_from_generated_files(tmp_path, lmo):
 
     matplotlib.use("Agg")
     from sixdpose.artifacts.results import write_result
-    from sixdpose.evaluation import report
+    from sixdpose.reporting import report
 
     res = tmp_path / "results"
     names = ("single_pred_super4pcs", "test_gt_ransac_icp", "test_gt_learned_it2")

@@ -160,7 +160,7 @@ def test_refiner_composition_recovers_pose():
 
 @pytest.mark.parametrize("crop", [32, 0])
 def test_batched_inference_equals_per_instance(pose_ds, crop):
-    from sixdpose.datasets.base import as_reader
+    from sixdpose.datasets import as_reader
     from sixdpose.pose.data import Frame, collate_frames, extract_instance
     from sixdpose.pose.infer import run_networks
 
@@ -301,7 +301,7 @@ def test_cli_refuses_foreign_output(pose_ds, tmp_path, capsys):
 
 def test_score0_rows_for_few_points_unknown_ids_and_nan_depth(pose_ds, tmp_path):
     from sixdpose.artifacts.predictions import Detection
-    from sixdpose.datasets.base import as_reader
+    from sixdpose.datasets import as_reader
     from sixdpose.pose.infer import Estimator
 
     run = fake_pose_run(tmp_path / "p", profile_config("smoke"))
@@ -324,7 +324,7 @@ def test_score0_rows_for_few_points_unknown_ids_and_nan_depth(pose_ds, tmp_path)
 def test_icp_colour_rows_and_predicted_masks(smoke_run, pose_ds, tmp_path):
     from sixdpose.artifacts.poses import read_results
     from sixdpose.artifacts.predictions import write_predictions
-    from sixdpose.datasets.base import as_reader
+    from sixdpose.datasets import as_reader
     from sixdpose.evaluation.evaluate import evaluate
 
     reader = as_reader(pose_ds)
@@ -439,14 +439,14 @@ def test_colour_jitter_augmentation():
 def test_learned_method_in_compare_methods(smoke_run, pose_ds):
     """``compare.learned_method``: a trained run as a method of ``compare_methods``, on chosen images only."""
     from sixdpose.datasets import open_dataset
-    from sixdpose.evaluation.compare import compare_methods, learned_method
+    from sixdpose.reporting.compare import compare_methods, learned_method
 
     keys = open_dataset(pose_ds).keys()
     table, runs = compare_methods(pose_ds, {"learned": learned_method(smoke_run)}, {"gt": ("gt", [1, 2])}, min_px=0)
     run = runs[("gt", "learned")]
     assert sorted({(e.scene_id, e.im_id) for e in run.estimates}) == sorted(keys[1:3])
     assert table.loc[0, "n_gt"] == 2 and 0 <= table.loc[0, "add_s"] <= 100
-    from sixdpose.evaluation.compare import per_object_table
+    from sixdpose.reporting.compare import per_object_table
 
     po = per_object_table(runs)
     assert list(po.columns) == ["obj_id", "name", "n_gt", "learned"] and po.loc[0, "n_gt"] == 2

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from sixdpose.cli import main
-from sixdpose.datasets.base import open_dataset
+from sixdpose.datasets import open_dataset
 from sixdpose.artifacts.poses import PoseEstimate as Estimate, read_results
 from sixdpose.artifacts.predictions import PredictionError, read_predictions
 from sixdpose.evaluation.evaluate import EvaluationError, evaluate

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sixdpose.cli import main
-from sixdpose.datasets.base import open_dataset
+from sixdpose.datasets import open_dataset
 from sixdpose.artifacts.poses import PoseEstimate as Estimate
 from sixdpose.evaluation.evaluate import evaluate
 from sixdpose.registration.runner import run_registration

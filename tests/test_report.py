@@ -1,4 +1,4 @@
-"""The report of notebook 07 (``sixdpose.evaluation.report``): tables I-III, per-object tables, the
+"""The report of notebook 07 (``sixdpose.reporting.report``): tables I-III, per-object tables, the
 accuracy curve, Fig. 7 and the write-up's macros, built from result files only; and ``evaluate``'s curve
 and ``--limit``."""
 
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from sixdpose.artifacts.results import write_result
-from sixdpose.evaluation import report
-from sixdpose.paper import TABLES
+from sixdpose.reporting import report
+from sixdpose.reporting.paper import TABLES
 
 
 def _res(d, name, acc, *, fps=2.0, curve=True, rows=None, cpu="Test CPU", config=None):

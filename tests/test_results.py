@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sixdpose.artifacts.readme import BLOCKS, main as readme_main, render_block, stale_blocks
+from sixdpose.reporting.readme import BLOCKS, main as readme_main, render_block, stale_blocks
 from sixdpose.artifacts.results import ResultError, read_result, write_result
 
 REPO = Path(__file__).resolve().parents[1]

@@ -11,7 +11,7 @@ import argparse
 import importlib
 import sys
 
-from .errors import SixdposeError
+from .errors import SixdposeError, UserError  # noqa: F401  (UserError: importable from here too)
 
 #: Modules that contribute subcommands, each with ``register(subparsers) -> None``; every parser it
 #: adds sets ``func`` (called with the parsed namespace, returns an exit status or None).
@@ -24,10 +24,6 @@ COMMAND_MODULES = (
     "sixdpose.pose.cli",
     "sixdpose.evaluation.cli",
 )
-
-
-class UserError(SixdposeError):
-    """A bad command-line argument found by a subcommand's own checks (one line, exit status 2)."""
 
 
 class _Parser(argparse.ArgumentParser):

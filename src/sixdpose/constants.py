@@ -61,6 +61,23 @@ def merged_mask_codes(names, max_instances: int = 4) -> dict[str, int]:
 #: At most this many instances of one object per scene (section III-C).
 MAX_INSTANCES_PER_OBJECT = 4
 
+# ---- thresholds of the evaluation protocol and of the stages that feed it (every default in the package
+# ---- reads these; tests/test_layers.py fails on a copy typed elsewhere)
+#: A ground-truth instance is scored (``evaluate``, the comparisons) and, with GT masks, registered by the
+#: graph only if it has at least this many visible pixels.
+MIN_VISIBLE_PX = 400
+
+#: A pose is correct if its ADD(-S) error is below this fraction of the object's diameter (paper eq. 4: 10 %).
+ADD_THRESHOLD = 0.1
+
+#: The pose stages (``register``, ``predict-pose``) use a predicted mask only if its detection score is at
+#: least this.
+MIN_DETECTION_SCORE = 0.5
+
+#: ``segment`` writes every detection scoring at least this (low, so that AP sees the whole precision-recall
+#: curve); the pose stages then apply :data:`MIN_DETECTION_SCORE`.
+DETECTION_SCORE_FLOOR = 0.05
+
 #: Attribution required by the YCB models' CC BY 4.0 licence.
 YCB_ATTRIBUTION = (
     'Object models: "The YCB Object and Model Set" (Calli, Walsman, Singh, Srinivasa, Abbeel, Dollar; '

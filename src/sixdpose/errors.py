@@ -17,3 +17,8 @@ class ConfigError(SixdposeError, ValueError):
 class OutputError(SixdposeError):
     """An output path cannot be used: a file where a directory is expected, no permission, or a
     non-empty directory that this command did not write."""
+
+
+class UserError(SixdposeError):
+    """A bad command-line argument found by a subcommand's own checks (one line, exit status 2). Raised only
+    by the ``cli`` modules; library code raises its stage's own :class:`SixdposeError` subclass."""

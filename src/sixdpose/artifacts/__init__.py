@@ -6,7 +6,7 @@ artifact                          module                      writer -> readers
 predicted instance masks (.npz)   :mod:`.predictions`         ``segment`` -> ``register``, ``predict-pose``
 pose results (BOP CSV)            :mod:`.poses`               ``register``, ``predict-pose`` -> ``evaluate``
 result tables (CSV + LaTeX)       :mod:`.tables`              ``evaluate``, notebooks, benchmarks
-result artifacts (results/*.json) :mod:`.results`             benchmarks, ``evaluate --result-name`` -> :mod:`.readme`
+result artifacts (results/*.json) :mod:`.results`             benchmarks, ``evaluate --result-name`` -> reporting
 reference models (PLY)            :mod:`sixdpose.datasets.ply`  ``generate``, ``export-bop`` -> readers
 the synthetic layout              :mod:`sixdpose.datasets.layout`  ``generate`` (and test data) -> reader
 ================================  ==========================  ==========================================

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import SixdposeError
 from ..fileio import atomic_write_text, claim_output_file
+from ..geometry import X_from
 
 #: First line of every results CSV.
 RESULTS_HEADER = "scene_id,im_id,obj_id,score,R,t,time"
@@ -55,9 +56,7 @@ class PoseEstimate:
     @property
     def X_CO(self) -> np.ndarray:
         """The pose as a (4, 4) homogeneous matrix (metres)."""
-        X = np.eye(4)
-        X[:3, :3], X[:3, 3] = self.R, self.t
-        return X
+        return X_from(self.R, self.t)
 
     @classmethod
     def failed(cls, scene_id: int, im_id: int, obj_id: int, reason: str) -> "PoseEstimate":

@@ -1,6 +1,6 @@
 """Result artifacts: the figures a benchmark or an evaluation measured, with the commit, date, hardware
 and command that produced them. This module is the one writer and the one reader of ``results/``;
-the README's generated tables (:mod:`sixdpose.artifacts.readme`) are built from these files only.
+the README's generated tables (:mod:`sixdpose.reporting.readme`) are built from these files only.
 
 One result is ``<results_dir>/<name>.json`` (and, when it has a table, ``<name>.csv`` with the same rows
 for spreadsheets; the JSON is the record). JSON, UTF-8, format version 1::

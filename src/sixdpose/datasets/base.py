@@ -163,36 +163,6 @@ def read_image(path: str | Path) -> np.ndarray:
         raise DatasetError(f"{path}: unreadable image ({e})") from None
 
 
-def open_dataset(path: str | Path, split: str = "test", **kwargs) -> DatasetReader:
-    """Open a dataset directory, detecting its layout.
-
-    Args:
-        path: a synthetic dataset directory (has ``gt.yml``) or a BOP dataset root (has
-            ``models/models_info.json``).
-        split: BOP split name (ignored for the synthetic layout).
-        **kwargs: passed to the reader class.
-    Returns:
-        A :class:`DatasetReader`: a :class:`~sixdpose.datasets.synthetic.SyntheticDataset` or a
-        :class:`~sixdpose.datasets.bop.BopDataset`.
-    Raises:
-        DatasetError: the directory does not exist or is neither layout.
-    """
-    path = Path(path)
-    if not path.is_dir():
-        raise DatasetError(f"{path}: dataset directory not found")
-    if (path / "gt.yml").is_file() or (path / "manifest.json").is_file():
-        from .synthetic import SyntheticDataset
-
-        return SyntheticDataset(path, **kwargs)
-    if (path / "models" / "models_info.json").is_file():
-        from .bop import BopDataset
-
-        return BopDataset(path, split=split, **kwargs)
-    raise DatasetError(
-        f"{path}: not a dataset (no gt.yml for the synthetic layout, no models/models_info.json for BOP)"
-    )
-
-
 def check_depth_scale(reader: "DatasetReader", n_images: int = 3, low: float = 0.5, high: float = 2.0) -> float | None:
     """Guard against a wrong depth unit: compare the median masked depth of annotated instances with
     their ground-truth distance ``t_z`` on the first ``n_images`` images that have both.
@@ -232,16 +202,3 @@ def check_depth_scale(reader: "DatasetReader", n_images: int = 3, low: float = 0
                            "distance of the objects (check the depth unit: metres in the synthetic layout, "
                            "depth_scale in BOP scene_camera.json)")
     return r
-
-
-def as_reader(data: "str | Path | DatasetReader", split: str = "test", **kwargs) -> DatasetReader:
-    """``data`` itself if it is already a :class:`DatasetReader`, else :func:`open_dataset` of the path.
-
-    Every stage entry point accepts a reader or a path through this function, so a dataset is opened
-    once and a caller can hand in a reader of its own (for example one that alters images).
-    """
-    if isinstance(data, DatasetReader):
-        if kwargs:
-            raise TypeError(f"reader options {sorted(kwargs)} apply only when a path is given")
-        return data
-    return open_dataset(data, split=split, **kwargs)

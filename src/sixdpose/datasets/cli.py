@@ -15,7 +15,7 @@ def register(sub) -> None:
 
 
 def _run(args) -> int:
-    from .base import open_dataset
+    from .readers import open_dataset
     from .bop import export_bop
 
     ds = open_dataset(args.data)

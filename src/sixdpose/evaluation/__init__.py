@@ -1,6 +1,7 @@
-"""Evaluation: ADD(-S) and the BOP 2019 metrics (:mod:`.metrics`, paper eq. 4), accuracy and timing of
-results (:mod:`.evaluate`, :mod:`.bop`), method comparisons (:mod:`.compare`) and figures
-(:mod:`.visualize`). Imported lazily, so building the command line does not load scipy."""
+"""Evaluation (the scoring layer): ADD(-S) and the BOP 2019 metrics (:mod:`.metrics`, paper eq. 4), accuracy
+and timing of results (:mod:`.evaluate`, :mod:`.bop`) and figures (:mod:`.visualize`); method comparisons and
+the paper's tables are in :mod:`sixdpose.reporting`. Imported lazily, so building the command line does not
+load scipy."""
 
 import importlib
 

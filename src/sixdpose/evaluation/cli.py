@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..constants import ADD_THRESHOLD, MIN_VISIBLE_PX
+
 
 def register(sub) -> None:
     """Add the ``evaluate`` subcommand."""
@@ -13,8 +15,9 @@ def register(sub) -> None:
     p.add_argument("--results", required=True, help="BOP results CSV (from `sixdpose register`)")
     p.add_argument("--split", default="test", help="BOP split (ignored for the synthetic layout)")
     p.add_argument("--out", default=None, help="output directory (default: next to the results, <results>_eval)")
-    p.add_argument("--min-px", type=int, default=400, help="count GT instances with at least this many visible pixels")
-    p.add_argument("--threshold", type=float, default=0.1, help="correct if ADD(-S) < threshold x diameter")
+    p.add_argument("--min-px", type=int, default=MIN_VISIBLE_PX,
+                   help="count GT instances with at least this many visible pixels")
+    p.add_argument("--threshold", type=float, default=ADD_THRESHOLD, help="correct if ADD(-S) < threshold x diameter")
     p.add_argument("--symmetric-ids", default=None,
                    help="BOP only: comma-separated obj_ids to treat as symmetric (overrides models_info.json)")
     p.add_argument("--all-images", action="store_true",
@@ -31,14 +34,14 @@ def register(sub) -> None:
     g.add_argument("--result-name", default=None, metavar="NAME",
                    help="also write the summary and the per-object table, with commit, date, hardware and this "
                         "command line, as the result artifact RESULTS_DIR/NAME.json (+ .csv); README tables are "
-                        "generated from these (python -m sixdpose.artifacts.readme)")
+                        "generated from these (python -m sixdpose.reporting.readme)")
     g.add_argument("--results-dir", default="results", help="directory of result artifacts (default: results)")
     p.set_defaults(func=_run)
 
 
 def _run(args) -> int:
     from ..artifacts.poses import read_results
-    from ..datasets.base import open_dataset
+    from ..datasets.readers import open_dataset
     from ..fileio import claim_output_dir
     from .evaluate import evaluate, write_tables
 
@@ -52,7 +55,7 @@ def _run(args) -> int:
     ests = read_results(res_path)
     kw = {}
     if args.symmetric_ids:
-        from ..cli import UserError
+        from ..errors import UserError
 
         try:
             kw["symmetric_ids"] = [int(x) for x in args.symmetric_ids.split(",") if x.strip()]
@@ -60,7 +63,7 @@ def _run(args) -> int:
             raise UserError(f"--symmetric-ids: expected comma-separated integers, got {args.symmetric_ids!r}") from None
     ds = open_dataset(args.data, split=args.split, **kw)
     if args.limit < 0:
-        from ..cli import UserError
+        from ..errors import UserError
 
         raise UserError(f"--limit: expected N >= 0 images, got {args.limit}")
     images = ds.keys()[: args.limit] if args.limit else (ds.keys() if args.all_images else None)

@@ -26,7 +26,9 @@ import numpy as np
 
 from ..artifacts.poses import PoseEstimate
 from ..artifacts.tables import write_table
-from ..datasets.base import DatasetReader, as_reader
+from ..constants import ADD_THRESHOLD, MIN_VISIBLE_PX
+from ..datasets.base import DatasetReader
+from ..datasets.readers import as_reader
 from ..errors import SixdposeError
 from ..fileio import atomic_write_json
 from . import bop as bop_scores
@@ -114,8 +116,8 @@ def greedy_match(err: np.ndarray, limit: float) -> list[int | None]:
     return match
 
 
-def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate], min_px: int = 400,
-             threshold: float = 0.1, progress: bool = False, images=None, bop: bool = False) -> EvalResult:
+def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate], min_px: int = MIN_VISIBLE_PX,
+             threshold: float = ADD_THRESHOLD, progress: bool = False, images=None, bop: bool = False) -> EvalResult:
     """Score ``estimates`` against ``dataset`` (see the module docstring for the protocol).
 
     Linear in the number of images: each evaluated image's annotations are read once, without its

@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..constants import ADD_THRESHOLD
+
 
 def transform_pts(pts: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Apply ``p -> R p + t`` to (N, 3) points; returns (N, 3)."""
@@ -41,7 +43,7 @@ def add_or_adds(R_est, t_est, R_gt, t_gt, pts, symmetric: bool) -> float:
     return (adds if symmetric else add)(R_est, t_est, R_gt, t_gt, pts)
 
 
-def is_correct(error: float, diameter: float, threshold: float = 0.1) -> bool:
+def is_correct(error: float, diameter: float, threshold: float = ADD_THRESHOLD) -> bool:
     """The paper's accuracy criterion: ``error < threshold * diameter`` (10 % of the diameter)."""
     return bool(error < threshold * diameter)
 

@@ -8,6 +8,7 @@ import numpy as np
 
 from ..assets import load_catalog, load_mesh, resolve_assets_dir
 from ..datasets.geometry import backproject
+from ..geometry import X_from
 
 
 def _mesh_source(root: Path, assets, bop_models):
@@ -122,11 +123,8 @@ def resting_penetrations(dataset_dir: str | Path, assets: str | Path | None = No
             if o["left_scene"]:
                 continue
             pr = physical_properties(mesh_of(o["name"]), 1.0)  # the box only: the mass does not matter
-            X = np.eye(4)
-            X[:3, :3] = np.asarray(o["R_WO"])
-            X[:3, 3] = o["t_WO"]
-            Xc = X.copy()
-            Xc[:3, 3] = X[:3, :3] @ pr.box_center + X[:3, 3]
+            R_WO, t_WO = np.asarray(o["R_WO"], dtype=float), np.asarray(o["t_WO"], dtype=float)
+            Xc = X_from(R_WO, R_WO @ pr.box_center + t_WO)  # the object's box in the world
             corners = (Xc[:3, :3] @ (np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)]) * pr.box_size / 2).T).T + Xc[:3, 3]
             over_table = (np.abs(corners[:, 0]) < hx) & (np.abs(corners[:, 1]) < hy)
             on_table = Xc[2, 3] > cfg.table_height and abs(Xc[0, 3]) < hx and abs(Xc[1, 3]) < hy

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..assets import PhysicalProperties
 from ..constants import TARGET_OBJECTS
+from ..geometry import X_from
 from .config import GenerationConfig
 
 
@@ -111,9 +112,7 @@ def sample_scene(
                 break
         placed.append((p, r))
         R = random_rotation(rng)
-        X = np.eye(4)
-        X[:3, :3] = R
-        X[:3, 3] = p - R @ pr.box_center  # the box centre sits at p
+        X = X_from(R, p - R @ pr.box_center)  # the box centre sits at p
         inst = inst_count.get(name, 0)
         inst_count[name] = inst + 1
         specs.append(ObjectSpec(name, role, inst, X, off))
@@ -133,10 +132,7 @@ def look_at(p_WC: np.ndarray, p_WT: np.ndarray, roll: float = 0.0) -> np.ndarray
     x = np.cross(y, z)
     c, s = np.cos(roll), np.sin(roll)
     R = np.stack([x, y, z], axis=1) @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
-    X = np.eye(4)
-    X[:3, :3] = R
-    X[:3, 3] = p_WC
-    return X
+    return X_from(R, p_WC)
 
 
 def camera_arc(rng: np.random.Generator, cfg: GenerationConfig) -> list[np.ndarray]:

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..assets import PhysicalProperties
+from ..geometry import X_from
 from .config import GenerationConfig
 from .scene import ObjectSpec
 
@@ -88,15 +89,12 @@ def _static_scene(cfg: GenerationConfig):
     thick = 0.04
     leg_h = cfg.table_height - thick
     out = []
-    X = np.eye(4)
-    X[2, 3] = cfg.table_height - thick / 2
+    X = X_from(np.eye(3), (0.0, 0.0, cfg.table_height - thick / 2))
     out.append(("table", X, (tx, ty, thick), (0.55, 0.40, 0.26, 1.0), TABLE_LABEL))
     for i, (sx, sy) in enumerate([(1, 1), (1, -1), (-1, 1), (-1, -1)]):
-        X = np.eye(4)
-        X[:3, 3] = (sx * (tx / 2 - 0.05), sy * (ty / 2 - 0.05), leg_h / 2)
+        X = X_from(np.eye(3), (sx * (tx / 2 - 0.05), sy * (ty / 2 - 0.05), leg_h / 2))
         out.append((f"leg{i}", X, (0.05, 0.05, leg_h), (0.45, 0.32, 0.2, 1.0), TABLE_LABEL))
-    X = np.eye(4)
-    X[2, 3] = -0.5  # a thick box: its top face is the floor at z = 0
+    X = X_from(np.eye(3), (0.0, 0.0, -0.5))  # a thick box: its top face is the floor at z = 0
     out.append(("ground", X, (30.0, 30.0, 1.0), (0.62, 0.62, 0.6, 1.0), GROUND_LABEL))
     return out
 
@@ -212,9 +210,7 @@ class SceneSimulator:
 
 
 def _translation(p) -> np.ndarray:
-    X = np.eye(4)
-    X[:3, 3] = p
-    return X
+    return X_from(np.eye(3), p)
 
 
 class PoolRenderer:

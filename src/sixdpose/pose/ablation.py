@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..constants import MIN_VISIBLE_PX
+
 #: The variants of the issue, as overrides of a base profile. ``paper``: the paper's choices (absolute
 #: translation, quaternion, no normalisation) on the base profile's crop/width; each other row changes
 #: one thing. The last three change one thing on the centroid-offset base: at a CPU budget every
@@ -34,7 +36,7 @@ COLUMNS = ("variant", "translation", "rotation", "norm", "epochs", "steps", "tra
 
 
 def run_ablation(train, val, out_dir, *, profile: str = "cpu", time_budget: float | None = None, variants: dict | None = None,
-                 min_px: int = 400, val_images: int = 0, progress: bool = False, **overrides):
+                 min_px: int = MIN_VISIBLE_PX, val_images: int = 0, progress: bool = False, **overrides):
     """Train each variant for the same budget and score it on ``val``.
 
     Args:
@@ -50,7 +52,7 @@ def run_ablation(train, val, out_dir, *, profile: str = "cpu", time_budget: floa
     """
     import pandas as pd
 
-    from ..datasets.base import as_reader
+    from ..datasets.readers import as_reader
     from ..evaluation.evaluate import evaluate
     from .checkpoint import load
     from .infer import predict_dataset

@@ -10,7 +10,9 @@ import os
 from pathlib import Path
 
 from ..config import add_set_option, parse_overrides
+from ..constants import MIN_DETECTION_SCORE, MIN_VISIBLE_PX
 from ..logs import setup_logging
+from ..registry import STAGE_PROFILES
 
 
 def _overrides(args) -> dict:
@@ -120,7 +122,7 @@ def _cmd_ablation(args) -> int:
 def _train_args(p, refiner: bool) -> None:
     p.add_argument("--data", required=True, help="training dataset (synthetic layout or BOP root), e.g. data/train")
     p.add_argument("--out", required=True, help="run directory (config.json, metrics.csv, last.pt, model.pt)")
-    p.add_argument("--profile", choices=("smoke", "cpu", "paper"), default=None,
+    p.add_argument("--profile", choices=STAGE_PROFILES, default=None,
                    help="named config (default smoke; on --resume: the run's)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its last completed epoch")
     p.add_argument("--val", default=None, help="validation dataset scored every epoch (ADD(-S) %% into metrics.csv), e.g. data/val")
@@ -158,7 +160,8 @@ def register(subparsers) -> None:
     p.add_argument("--refiner", default=None, help="run directory of train-refiner")
     p.add_argument("--iterations", type=int, default=None, help="refinement iterations (default: the refiner's, 2)")
     p.add_argument("--masks", default="gt", help="gt or PRED_DIR of `sixdpose segment`")
-    p.add_argument("--score-thresh", dest="score_thresh", type=float, default=0.5, help="minimum score of a predicted mask")
+    p.add_argument("--score-thresh", dest="score_thresh", type=float, default=MIN_DETECTION_SCORE,
+                   help="minimum score of a predicted mask (default %(default)s)")
     p.add_argument("--icp", action="store_true", help="refine every pose with Open3D ICP (the hybrid stage's)")
     p.add_argument("--colour-verify", dest="colour_verify", action="store_true",
                    help="then run the hybrid stage's colour verification")
@@ -182,12 +185,13 @@ def register(subparsers) -> None:
     p.add_argument("--train", required=True, help="training dataset, e.g. data/train")
     p.add_argument("--val", required=True, help="held-out dataset the variants are scored on, e.g. data/val (never test)")
     p.add_argument("--out", required=True, help="directory of the variants' runs")
-    p.add_argument("--profile", choices=("smoke", "cpu", "paper"), default="cpu", help="base PoseConfig profile")
+    p.add_argument("--profile", choices=STAGE_PROFILES, default="cpu", help="base PoseConfig profile")
     p.add_argument("--epochs", type=int, default=None, help="epochs per variant (equal steps; time budget off)")
     p.add_argument("--time-budget", dest="time_budget", type=float, default=None, help="seconds of training per variant (equal time)")
     p.add_argument("--variants", default=None, help="comma-separated variant indices (default: all)")
     p.add_argument("--val-images", dest="val_images", type=int, default=0, help="score on the first N images of --val (0: all)")
-    p.add_argument("--min-px", dest="min_px", type=int, default=400, help="visible pixels of a scored instance")
+    p.add_argument("--min-px", dest="min_px", type=int, default=MIN_VISIBLE_PX,
+                   help="visible pixels of a scored instance")
     p.add_argument("--results-dir", default="results", help="directory of the result artifact (default: results)")
     p.add_argument("--result-name", default=None, help="result name (default: pose_ablation_<profile>)")
     p.add_argument("--no-result", action="store_true", help="write no result artifact")

@@ -20,7 +20,9 @@ import numpy as np
 import torch
 
 from ..artifacts.poses import PoseEstimate
+from ..constants import MIN_DETECTION_SCORE
 from ..datasets.base import DatasetError
+from ..geometry import X_from
 from . import checkpoint as ck
 from .config import PoseConfig, RefinerConfig
 from .data import Frame, PoseError, collate_frames, extract_instance
@@ -98,7 +100,8 @@ class Estimator:
     """
 
     def __init__(self, pose, refiner=None, *, iterations: int | None = None, device: str | None = None, icp: bool = False,
-                 colour_verify: bool = False, reader=None, score_thresh: float = 0.5, seed: int = 0, max_batch: int = 64):
+                 colour_verify: bool = False, reader=None, score_thresh: float = MIN_DETECTION_SCORE, seed: int = 0,
+                 max_batch: int = 64):
         dev = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         pose_ckpt = ck.load(pose, kind="pose")
         net, cfg = load_posenet(pose_ckpt, dev)
@@ -112,8 +115,8 @@ class Estimator:
 
     @classmethod
     def from_networks(cls, posenet, cfg: PoseConfig, classes, refiner=None, refiner_cfg: RefinerConfig | None = None, *,
-                      iterations: int | None = None, device="cpu", reader=None, score_thresh: float = 0.5, seed: int = 0,
-                      max_batch: int = 64) -> "Estimator":
+                      iterations: int | None = None, device="cpu", reader=None,
+                      score_thresh: float = MIN_DETECTION_SCORE, seed: int = 0, max_batch: int = 64) -> "Estimator":
         """An estimator over networks already in memory (validation during training), without checkpoints.
 
         Args:
@@ -146,8 +149,7 @@ class Estimator:
         if icp or colour_verify:
             if reader is None:
                 raise PoseError("ICP and colour verification need the dataset reader (its object models)")
-            from ..registration.geometry import ReferenceCache
-            from ..registration.presets import get_preset
+            from ..registration import ReferenceCache, get_preset
 
             self.reg_cfg = get_preset("default")
             self._cache = ReferenceCache(reader)
@@ -231,34 +233,21 @@ class Estimator:
         return self._diameters[obj_id]
 
     def _post(self, inst, R, t):
-        """Optional ICP and colour verification of one pose (hybrid stage code, ``default`` preset)."""
+        """Optional ICP and colour verification of one pose: the hybrid stage's refinement chain
+        (:func:`sixdpose.registration.refine_pose`, ``default`` preset)."""
         if not (self.icp or self.colour_verify):
             return R, t
-        from ..registration.methods import get_reference, prepare_scene, refine_icp
+        from ..registration import refine_pose
 
-        X = np.eye(4)
-        X[:3, :3], X[:3, 3] = R, t
-        ref, _ = get_reference(self._cache, inst.obj_id, "icp", self.reg_cfg)
-        scene = prepare_scene(inst.points, ref.diameter, self.reg_cfg, features=False)
-        if self.icp and len(scene.points) >= 3:
-            X = refine_icp(scene, ref, X, self.reg_cfg).X_CO
-        if self.colour_verify and inst.colors is not None:
-            from ..registration.verify import colour_search
-
-            grid, _ = self._cache.colour_grid(inst.obj_id, self.reg_cfg.cv_grid_cells, self.reg_cfg.cv_smooth_rel)
-            if grid is not None:
-                res = colour_search(X, inst.points, inst.colors, grid, ref.diameter, self.reg_cfg)
-                if res.changed:
-                    X = res.X_CO
-                    if self.icp and len(scene.points) >= 3:
-                        X = refine_icp(scene, ref, X, self.reg_cfg).X_CO
-        return X[:3, :3], X[:3, 3]
+        r = refine_pose(X_from(R, t), inst.points, inst.obj_id, self._cache, self.reg_cfg, icp=self.icp,
+                        colour_verify=self.colour_verify, colors=inst.colors)
+        return r.X_CO[:3, :3], r.X_CO[:3, 3]
 
 
 def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: int | None = None, icp: bool = False,
                     colour_verify: bool = False, device: str | None = None, split: str = "test", limit: int = 0,
-                    score_thresh: float = 0.5, progress: bool = False, estimator: Estimator | None = None,
-                    indices=None) -> tuple[list[PoseEstimate], Estimator]:
+                    score_thresh: float = MIN_DETECTION_SCORE, progress: bool = False,
+                    estimator: Estimator | None = None, indices=None) -> tuple[list[PoseEstimate], Estimator]:
     """Estimate poses on every image of a dataset (disk reads are not timed).
 
     Args:
@@ -271,7 +260,7 @@ def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: 
     Raises:
         PredictionError (a corrupt prediction file, named), CheckpointError, PoseError, DatasetError.
     """
-    from ..datasets.base import as_reader
+    from ..datasets.readers import as_reader
 
     reader = as_reader(data, split=split)
     est = estimator or Estimator(pose, refiner, iterations=iterations, device=device, icp=icp, colour_verify=colour_verify,

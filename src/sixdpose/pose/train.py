@@ -31,7 +31,7 @@ import numpy as np
 import torch
 import torch.distributed as dist
 
-from ..datasets.base import as_reader
+from ..datasets.readers import as_reader
 from ..errors import SixdposeError
 from ..fileio import atomic_write_json, claim_output_dir
 from ..runs import append_metrics, process_group, rng_state, save_checkpoint, set_rng_state, truncate_metrics

@@ -2,11 +2,23 @@
 (RANSAC or FGR on FPFH features, or Super4PCS) -> optional ICP -> optional colour verification.
 See :mod:`.methods` (per instance) and :mod:`.runner` (over a dataset)."""
 
-from .methods import METHODS, Registration, estimate_pose, prepare_scene, refine_icp, register_fgr, register_ransac, register_super4pcs
+from .geometry import ReferenceCache
+from .methods import (
+    METHODS,
+    Registration,
+    estimate_pose,
+    prepare_scene,
+    refine_icp,
+    refine_pose,
+    register_fgr,
+    register_ransac,
+    register_super4pcs,
+)
 from .presets import PRESETS, RegistrationConfig, get_preset
 from .runner import RegistrationError, run_registration
 
 __all__ = [
-    "METHODS", "PRESETS", "Registration", "RegistrationConfig", "RegistrationError", "estimate_pose", "get_preset",
-    "prepare_scene", "refine_icp", "register_fgr", "register_ransac", "register_super4pcs", "run_registration",
+    "METHODS", "PRESETS", "ReferenceCache", "Registration", "RegistrationConfig", "RegistrationError", "estimate_pose",
+    "get_preset", "prepare_scene", "refine_icp", "refine_pose", "register_fgr", "register_ransac", "register_super4pcs",
+    "run_registration",
 ]

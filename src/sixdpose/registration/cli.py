@@ -5,6 +5,8 @@ from __future__ import annotations
 import logging
 
 from ..config import add_set_option, parse_overrides
+from ..constants import MIN_DETECTION_SCORE
+from ..registry import HYBRID_ALGORITHMS
 
 
 def register(sub) -> None:
@@ -13,7 +15,7 @@ def register(sub) -> None:
                        description="Register every instance of a dataset split; write a BOP results CSV and, "
                                    "beside it, <out>.config.yml (the parameters used).")
     p.add_argument("--data", required=True, help="dataset directory (synthetic layout or BOP root)")
-    p.add_argument("--method", required=True, choices=["ransac", "fgr", "super4pcs"])
+    p.add_argument("--method", required=True, choices=list(HYBRID_ALGORITHMS))
     p.add_argument("--icp", action="store_true", help="refine with ICP (point-to-plane by default)")
     p.add_argument("--masks", default="gt", help="'gt' or a directory of predicted masks (<scene>_<im>.npz)")
     p.add_argument("--split", default="test", help="BOP split (ignored for the synthetic layout)")
@@ -24,8 +26,8 @@ def register(sub) -> None:
     p.add_argument("--limit", type=int, default=None, help="only the first N images")
     p.add_argument("--stride", type=int, default=1, help="only every N-th image (a fixed subset spread over the scenes)")
     p.add_argument("--min-px", type=int, default=0, help="with GT masks, skip instances with fewer visible pixels")
-    p.add_argument("--min-score", type=float, default=0.5,
-                   help="with predicted masks, skip detections whose score is below this (default 0.5)")
+    p.add_argument("--min-score", type=float, default=MIN_DETECTION_SCORE,
+                   help="with predicted masks, skip detections whose score is below this (default %(default)s)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_run)
 
@@ -35,8 +37,8 @@ def _run(args) -> int:
 
     from ..artifacts.poses import RESULTS_HEADER, write_results
     from ..artifacts.tables import write_table
-    from ..cli import UserError
-    from ..datasets.base import open_dataset
+    from ..datasets.readers import open_dataset
+    from ..errors import UserError
     from ..fileio import claim_output_file
     from .presets import get_preset
     from .runner import run_registration

@@ -21,10 +21,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..geometry import X_from
+from ..registry import HYBRID_ALGORITHMS
 from .geometry import Reference, ReferenceCache, compute_fpfh, estimate_normals, to_o3d
 from .presets import RegistrationConfig
 
-METHODS = ("ransac", "fgr", "super4pcs")
+#: The global registration algorithms (:data:`sixdpose.registry.HYBRID_ALGORITHMS`).
+METHODS = tuple(HYBRID_ALGORITHMS)
 
 
 @dataclass
@@ -99,10 +102,7 @@ def prepare_scene(points: np.ndarray, diameter: float, cfg: RegistrationConfig, 
 
 def _invert(X_AB: np.ndarray) -> np.ndarray:
     """``X_BA`` from ``X_AB`` (rigid 4x4 inverse)."""
-    X_BA = np.eye(4)
-    X_BA[:3, :3] = X_AB[:3, :3].T
-    X_BA[:3, 3] = -X_AB[:3, :3].T @ X_AB[:3, 3]
-    return X_BA
+    return X_from(X_AB[:3, :3].T, -X_AB[:3, :3].T @ X_AB[:3, 3])
 
 
 def register_ransac(scene: SceneCloud, ref: Reference, cfg: RegistrationConfig) -> Registration:
@@ -208,6 +208,67 @@ def get_reference(cache: ReferenceCache, obj_id: int, method: str, cfg: Registra
     return ref, dt
 
 
+def refine_pose(
+    X_CO: np.ndarray,
+    points: np.ndarray,
+    obj_id: int,
+    cache: ReferenceCache,
+    cfg: RegistrationConfig,
+    *,
+    icp: bool,
+    colour_verify: bool,
+    colors: np.ndarray | None = None,
+    score: float = 0.0,
+    scene: SceneCloud | None = None,
+    ref: Reference | None = None,
+) -> Registration:
+    """The refinement chain of section IV-B after any first pose: ICP -> colour check -> ICP again.
+
+    ICP refines ``X_CO`` (when ``icp``); the colour check
+    (:func:`~sixdpose.registration.verify.colour_search`, when ``colour_verify``, ``colors`` match
+    ``points`` and the model is coloured) may replace it by a rotation about the centroid that agrees
+    better with the colours, which ICP then refines again (when ``icp``). ``register`` (after a global
+    method, :func:`estimate_pose`) and ``predict-pose`` (after the network,
+    :class:`sixdpose.pose.Estimator`) both call this one function.
+
+    Args:
+        X_CO: (4, 4) initial pose of the object in the camera frame, metres.
+        points: (N, 3) masked camera-frame points, metres. colors: optional (N, 3) colours in [0, 1].
+        obj_id: object id (its model comes from ``cache.dataset``). cache: per-process
+            :class:`~sixdpose.registration.geometry.ReferenceCache`. cfg: configuration.
+        icp, colour_verify: which steps run. score: the score of ``X_CO`` (kept when ICP does not run).
+        scene, ref: the prepared scene cloud and reference when the caller has them (else built here:
+            the ``icp`` reference, a scene without features).
+    Returns:
+        :class:`Registration` with the refined ``X_CO``, the last ICP fitness (or ``score``), the
+        seconds of this chain (including a scene or reference built here and the colour grid's first
+        use) and ``info`` (``colour_changed``, ``colour_corr`` when the colour check ran).
+    """
+    t0 = time.perf_counter()
+    if ref is None:
+        ref, _ = get_reference(cache, obj_id, "icp", cfg)
+    if scene is None and icp:
+        scene = prepare_scene(points, ref.diameter, cfg, features=False)
+    can_icp = icp and len(scene.points) >= 3
+    info: dict = {}
+    if can_icp:
+        r = refine_icp(scene, ref, X_CO, cfg)
+        X_CO, score = r.X_CO, r.score
+    if colour_verify and colors is not None and len(colors) == len(points):
+        grid, _ = cache.colour_grid(obj_id, cfg.cv_grid_cells, cfg.cv_smooth_rel)
+        if grid is not None:
+            from .verify import colour_search
+
+            res = colour_search(X_CO, points, colors, grid, ref.diameter, cfg)
+            info.update(colour_changed=res.changed, colour_corr=res.col)
+            if res.changed:
+                X_CO = res.X_CO
+                if can_icp:
+                    r = refine_icp(scene, ref, X_CO, cfg)
+                    X_CO, score = r.X_CO, r.score
+    return Registration(X_CO, score, time.perf_counter() - t0, info)
+
+
 def estimate_pose(
     points: np.ndarray,
     obj_id: int,
@@ -226,9 +287,7 @@ def estimate_pose(
         cache: per-process :class:`ReferenceCache`.
         cfg: configuration. icp: refine with ICP.
         colors: optional (N, 3) colours in [0, 1] of ``points``; with ``cfg.colour_verify`` (and a
-            coloured model) the pose is then checked by :func:`~sixdpose.registration.verify.colour_search`
-            and, if a rotation about the centroid agrees better with the colours, replaced (and refined
-            by ICP again when ``icp``).
+            coloured model) the pose is then checked by colour and refined again (:func:`refine_pose`).
     Returns:
         :class:`Registration` whose ``time`` includes scene preparation, the first-use cost of the
         model's reference (charged once per process), the method and ICP.
@@ -240,25 +299,7 @@ def estimate_pose(
     if len(scene.points) < 3:
         return Registration(np.eye(4), 0.0, scene.time + t_ref, {"reason": "fewer than 3 points after gating"})
     est = _FUNCS[method](scene, ref, cfg)
-    total = t_ref + scene.time + est.time
-    info = dict(est.info, global_score=est.score, n_scene=len(scene.points))
-    X_CO, score = est.X_CO, est.score
-    if icp:
-        r = refine_icp(scene, ref, X_CO, cfg)
-        total += r.time
-        X_CO, score = r.X_CO, r.score
-    if cfg.colour_verify and colors is not None and len(colors) == len(points):
-        grid, t_grid = cache.colour_grid(obj_id, cfg.cv_grid_cells, cfg.cv_smooth_rel)
-        if grid is not None:
-            from .verify import colour_search
-
-            t0 = time.perf_counter()
-            res = colour_search(X_CO, points, colors, grid, ref.diameter, cfg)
-            info.update(colour_changed=res.changed, colour_corr=res.col)
-            if res.changed:
-                X_CO = res.X_CO
-                if icp:
-                    r = refine_icp(scene, ref, X_CO, cfg)
-                    X_CO, score = r.X_CO, r.score
-            total += t_grid + time.perf_counter() - t0
-    return Registration(X_CO, score, total, info)
+    r = refine_pose(est.X_CO, points, obj_id, cache, cfg, icp=icp, colour_verify=cfg.colour_verify, colors=colors,
+                    score=est.score, scene=scene, ref=ref)
+    info = dict(est.info, global_score=est.score, n_scene=len(scene.points), **r.info)
+    return Registration(r.X_CO, r.score, t_ref + scene.time + est.time + r.time, info)

@@ -17,7 +17,9 @@ import numpy as np
 
 from ..artifacts.poses import PoseEstimate
 from ..artifacts.predictions import read_predictions
-from ..datasets.base import DatasetError, DatasetReader, as_reader, check_depth_scale
+from ..constants import MIN_DETECTION_SCORE
+from ..datasets.base import DatasetError, DatasetReader, check_depth_scale
+from ..datasets.readers import as_reader
 from ..errors import SixdposeError
 from .presets import RegistrationConfig
 
@@ -156,7 +158,7 @@ def run_registration(
     workers: int = 2,
     limit: int | None = None,
     min_px: int = 0,
-    min_score: float = 0.5,
+    min_score: float = MIN_DETECTION_SCORE,
     progress: bool = True,
     indices=None,
     failures: list | None = None,

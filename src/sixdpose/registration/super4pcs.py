@@ -34,6 +34,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..geometry import X_from
+
 if TYPE_CHECKING:
     from .presets import RegistrationConfig
 
@@ -431,6 +433,4 @@ def super4pcs(
             best = (float(s_full[k]), R[top[k]], t[top[k]])
         if best[0] >= stop_lcp:
             break
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = best[1], best[2]
-    return Super4PCSResult(T, best[0], tried, n_cong, n_ver, time.perf_counter() - t0)
+    return Super4PCSResult(X_from(best[1], best[2]), best[0], tried, n_cong, n_ver, time.perf_counter() - t0)

@@ -2,9 +2,9 @@
 
 Geometry alone cannot orient a sphere (YCB baseball, tennis ball), a cube (Rubik's cube) or a box
 (pudding box), and partial views of many other objects fit a flipped model equally well. After the
-geometric pose ``X_CO0`` (global registration + ICP), :func:`colour_search` scores a fixed set of
-rotations ``S`` of the model about its centroid ``c`` (the candidate pose is ``X_CO0 * A`` with
-``A(x) = S (x - c) + c``) by
+geometric pose ``X_CO`` (global registration + ICP), :func:`colour_search` scores a fixed set of
+rotations ``S`` of the model about its centroid ``c`` (the candidate pose is ``X_CN = X_CO @ X_ON``, the
+candidate object frame N in the object frame O being ``X_ON(x) = S (x - c) + c``) by
 
 * ``geo``: the soft fraction of scene points on the model surface (mean of ``exp(-d^2 / 2 sigma^2)``,
   ``d`` the distance to the nearest model point), and
@@ -31,6 +31,8 @@ from typing import TYPE_CHECKING
 import numba
 import numpy as np
 from scipy.spatial import cKDTree
+
+from ..geometry import X_from
 
 if TYPE_CHECKING:
     from .presets import RegistrationConfig
@@ -258,7 +260,6 @@ def colour_search(
         from .presets import PRESETS
 
         cfg = PRESETS["default"]
-    T0 = X_CO
     n_rot, n_points, n_points_fine = cfg.cv_rotations, cfg.cv_points, cfg.cv_points_fine
     tol_rel, coarse_sigma_rel, geo_weight = cfg.cv_tol_rel, cfg.cv_coarse_sigma_rel, cfg.cv_geo_weight
     smooth_rel, n_keep, nms_deg, n_refine = cfg.cv_smooth_rel, cfg.cv_keep, cfg.cv_nms_deg, cfg.cv_refine
@@ -274,9 +275,9 @@ def colour_search(
     fs_sharp = ch[sel_f]
     fs_smooth -= fs_smooth.mean(axis=0)
     fs_sharp -= fs_sharp.mean(axis=0)
-    R0, t0 = T0[:3, :3], T0[:3, 3]
+    R_CO, t_CO = X_CO[:3, :3], X_CO[:3, 3]
     c = grid.centroid
-    v_f = (P[sel_f] - t0) @ R0 - c  # object frame, relative to the centroid
+    v_f = (P[sel_f] - t_CO) @ R_CO - c  # object frame, relative to the centroid
     # points beyond the grid's radius cannot lie on the model under any rotation about the
     # centroid: they count as misses (surface term) and are left out of the colour correlation
     inside = np.linalg.norm(v_f, axis=1) < grid.radius
@@ -286,7 +287,7 @@ def colour_search(
     v_c, fs_smooth = v_f[: len(sel)][keep_c], fs_smooth[keep_c]
     v_f, fs_sharp = v_f[inside], fs_sharp[inside]
     if len(v_c) < 4 or len(v_f) < 4:
-        return SearchResult(T0, 0.0, 0.0, False)
+        return SearchResult(X_CO, 0.0, 0.0, False)
 
     v_c32, v_f32, c32 = v_c.astype(np.float32), v_f.astype(np.float32), c.astype(np.float32)
 
@@ -342,10 +343,8 @@ def colour_search(
     s0, g0, c0 = score(np.eye(3)[None], False, sigma)
     m = int(np.argmax(best_s))
     if best_s[m] <= s0[0] + min_gain:
-        return SearchResult(T0, float(g0[0]), float(c0[0]), False)
+        return SearchResult(X_CO, float(g0[0]), float(c0[0]), False)
     Sb = best[m]
-    A = np.eye(4)
-    A[:3, :3] = Sb
-    A[:3, 3] = c - Sb @ c
+    X_ON = X_from(Sb, c - Sb @ c)  # the best candidate's object frame N in the object frame O
     _, gb, cb = score(Sb[None], False, sigma)
-    return SearchResult(T0 @ A, float(gb[0]), float(cb[0]), True)
+    return SearchResult(X_CO @ X_ON, float(gb[0]), float(cb[0]), True)

@@ -34,6 +34,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..config import Config, from_profile
+from ..constants import DETECTION_SCORE_FLOOR
 
 
 @dataclass(frozen=True)
@@ -98,7 +99,7 @@ class SegConfig(Config):
     rpn_batch_size: int = 256
     box_batch_size: int = 512
     detections_per_img: int = 100
-    score_thresh: float = 0.05
+    score_thresh: float = DETECTION_SCORE_FLOOR
     # optimisation
     epochs: int = 100
     batch_size: int = 4

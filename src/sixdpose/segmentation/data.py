@@ -32,7 +32,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..datasets.base import DatasetError, Sample, open_dataset
+from ..datasets.base import DatasetError, Sample
+from ..datasets.readers import open_dataset
 from .config import SegConfig
 
 log = logging.getLogger("sixdpose.segmentation")

@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..datasets.base import DatasetError, open_dataset
+from ..datasets.base import DatasetError
+from ..datasets.readers import open_dataset
 from .data import ClassMap
 from ..artifacts.predictions import read_predictions
 from .infer import coco_image_id, encode_rle

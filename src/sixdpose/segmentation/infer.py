@@ -18,7 +18,8 @@ import numpy as np
 import torch
 
 from ..artifacts.predictions import write_predictions, write_predictions_meta
-from ..datasets.base import DatasetError, as_reader
+from ..datasets.base import DatasetError
+from ..datasets.readers import as_reader
 from ..errors import ConfigError
 from ..fileio import atomic_write_json, claim_output_dir
 from ..runs import pick_device

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..constants import MIN_DETECTION_SCORE
 from .train import LOSS_KEYS, read_metrics
 
 
@@ -58,7 +59,7 @@ def _overlay(rgb: np.ndarray, masks, labels, colors: dict) -> np.ndarray:
     return img
 
 
-def plot_predictions(data, pred_dir: str | Path, n: int = 3, score_thresh: float = 0.5, seed: int = 0,
+def plot_predictions(data, pred_dir: str | Path, n: int = 3, score_thresh: float = MIN_DETECTION_SCORE, seed: int = 0,
                      out: str | Path | None = None):
     """Ground-truth masks next to predicted masks for ``n`` random segmented images.
 

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..registry import METHOD
+
 
 @dataclass(frozen=True)
 class PaperTable:
@@ -53,18 +55,10 @@ TABLES: dict[str, PaperTable] = {
     }),
 }
 
-#: Our method keys -> the paper's row label for the same method (only where it is the same method).
-METHOD_ROWS = {
-    "ransac+icp": "Ours Hybrid(RANSAC + ICP)",
-    "fgr+icp": "Ours Hybrid(FGR + ICP)",
-    "super4pcs": "Ours Hybrid(Super4PCS)",
-    "learned": "Ours Full Learning (No Refinement)",
-    "learned+refine": "Ours Full Learning (Iterative)",
-}
-
-
 def paper_figure(table: str, method: str) -> float | None:
-    """The paper's figure for ``method`` (one of :data:`METHOD_ROWS`' keys, or a row label of the
+    """The paper's figure for ``method`` (a method key of :data:`sixdpose.registry.METHODS`, whose row
+    label is its ``paper_fps`` in Table II and its ``paper_acc`` in Tables I and III, or a row label of the
     table) in Table ``table`` (``"I"``, ``"II"``, ``"III"``); None when the paper has no such row."""
-    rows = TABLES[table].rows
-    return rows.get(METHOD_ROWS.get(method, method))
+    m = METHOD.get(method)
+    label = method if m is None else (m.paper_fps if table == "II" else m.paper_acc)
+    return None if label is None else TABLES[table].rows.get(label)

@@ -12,11 +12,11 @@ from dataclasses import dataclass
 from typing import Callable
 
 from ..artifacts.poses import PoseEstimate
-from ..datasets.base import DatasetReader, as_reader
-from .evaluate import EvalResult, evaluate
-
-#: The display name of each hybrid method (paper Tables I-III: "Ours Hybrid(RANSAC + ICP)" ...).
-HYBRID_NAMES = {"ransac": "RANSAC", "fgr": "FGR", "super4pcs": "Super4PCS"}
+from ..constants import ADD_THRESHOLD, MIN_DETECTION_SCORE, MIN_VISIBLE_PX
+from ..datasets.base import DatasetReader
+from ..datasets.readers import as_reader
+from ..evaluation.evaluate import EvalResult, evaluate
+from ..registry import HYBRID_ALGORITHMS
 
 
 @dataclass
@@ -29,7 +29,7 @@ class Run:
     result: EvalResult
 
 
-def hybrid_methods(cfg=None, workers: int = 2, methods=("ransac", "fgr", "super4pcs"), icp=(False, True)) -> dict[str, Callable]:
+def hybrid_methods(cfg=None, workers: int = 2, methods=tuple(HYBRID_ALGORITHMS), icp=(False, True)) -> dict[str, Callable]:
     """The hybrid methods as ``{display name: run(reader, masks, indices)}``.
 
     Args:
@@ -43,14 +43,14 @@ def hybrid_methods(cfg=None, workers: int = 2, methods=("ransac", "fgr", "super4
         for use_icp in icp:
             def run(reader, masks, indices, m=m, use_icp=use_icp):
                 return run_registration(reader, m, icp=use_icp, masks=masks, cfg=cfg, workers=workers, indices=indices,
-                                        min_px=400 if masks == "gt" else 0, progress=False)
+                                        min_px=MIN_VISIBLE_PX if masks == "gt" else 0, progress=False)
 
-            out[f"Hybrid ({HYBRID_NAMES[m]}{' + ICP' if use_icp else ''})"] = run
+            out[f"Hybrid ({HYBRID_ALGORITHMS[m]}{' + ICP' if use_icp else ''})"] = run
     return out
 
 
 def learned_method(pose, refiner=None, iterations: int = 0, icp: bool = False, colour_verify: bool = False,
-                   score_thresh: float = 0.5) -> Callable:
+                   score_thresh: float = MIN_DETECTION_SCORE) -> Callable:
     """A trained learned-pose run as a method ``run(reader, masks, indices)`` for :func:`compare_methods`.
 
     Args:
@@ -67,7 +67,7 @@ def learned_method(pose, refiner=None, iterations: int = 0, icp: bool = False, c
 
 
 def compare_methods(data: DatasetReader | str, methods: dict[str, Callable], mask_sources: dict[str, tuple[str, list[int]]],
-                    min_px: int = 400, threshold: float = 0.1, bop: bool = False, also=()):
+                    min_px: int = MIN_VISIBLE_PX, threshold: float = ADD_THRESHOLD, bop: bool = False, also=()):
     """Run every method on every mask source and evaluate each run on the same images.
 
     Args:

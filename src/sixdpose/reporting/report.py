@@ -7,12 +7,12 @@ Input: a results directory of the ``make reproduce`` graph (``results/<profile>/
   single-instance subset of paper section V-D, the setting of Table III) or ``lmo`` (LINEMOD-Occlusion,
   Table I);
 * ``masks``: ``gt`` (ground-truth masks) or ``pred`` (the graph's Mask R-CNN);
-* ``method``: one of :data:`METHODS`.
+* ``method``: one of :data:`sixdpose.registry.METHODS`.
 
 Other result files in the directory (ablations, benchmarks) are ignored here. Every function is pure
 (results in, tables / figures / LaTeX text out) except the ``write_*`` ones, which write through
 :mod:`sixdpose.artifacts.tables` and :mod:`sixdpose.fileio`. The paper's own figures come from
-:mod:`sixdpose.paper` and always stand in a column labelled as the paper's.
+:mod:`sixdpose.reporting.paper` and always stand in a column labelled as the paper's.
 """
 
 from __future__ import annotations
@@ -24,47 +24,17 @@ from pathlib import Path
 
 from ..artifacts.results import Result, list_results, machine_text, read_result
 from ..artifacts.tables import tex_escape, write_table
+from ..constants import ADD_THRESHOLD, MIN_VISIBLE_PX
 from ..errors import SixdposeError
 from ..fileio import atomic_write_text
-from ..paper import TABLES
+from ..registry import METHOD, METHODS, REAL_METHODS, Method
+from .paper import TABLES
 
 
 class ReportError(SixdposeError):
     """A results directory cannot be turned into the report (the message names the file or field)."""
 
 
-@dataclass(frozen=True)
-class Method:
-    """A pose method of the graph.
-
-    Attributes:
-        key: file-name key (``ransac_icp``). label: display name. kind: ``hybrid`` or ``learned``.
-        paper_acc: the paper's row label in Tables I and III (None: the paper has no such row).
-        paper_fps: the paper's row label in Table II (None: no such row).
-    """
-
-    key: str
-    label: str
-    kind: str
-    paper_acc: str | None = None
-    paper_fps: str | None = None
-
-
-#: The methods of the graph, in table order.
-METHODS: tuple[Method, ...] = (
-    Method("ransac", "RANSAC", "hybrid"),
-    Method("ransac_icp", "RANSAC + ICP", "hybrid", "Ours Hybrid(RANSAC + ICP)", "Ours Hybrid(RANSAC + ICP)"),
-    Method("fgr", "FGR", "hybrid", None, "Ours Hybrid(FGR)"),
-    Method("fgr_icp", "FGR + ICP", "hybrid", "Ours Hybrid(FGR + ICP)"),
-    Method("super4pcs", "Super4PCS", "hybrid", "Ours Hybrid(Super4PCS)", "Ours Hybrid(Super4PCS)"),
-    Method("super4pcs_icp", "Super4PCS + ICP", "hybrid"),
-    Method("learned_it0", "learned, no refinement", "learned", "Ours Full Learning (No Refinement)",
-           "Ours Full Learning (No Refinement)"),
-    Method("learned_it2", "learned + 2 refinement it.", "learned", "Ours Full Learning (Iterative)", "Ours Full Learning"),
-    Method("learned_it2_icp", "learned + 2 it. + ICP", "learned"),
-    Method("learned_it2_colour", "learned + 2 it. + colour verification", "learned"),
-)
-METHOD = {m.key: m for m in METHODS}
 #: Data splits of the graph and how the tables name them.
 SPLITS = {"test": "multi-instance", "single": "single-instance", "lmo": "LM-O"}
 #: Mask sources and how the tables name them.
@@ -346,9 +316,9 @@ def fig7(entry: Entry, root: str | Path = ".", n_good: int = 3, n_bad: int = 3, 
         (committed results whose runs were made on another machine).
     """
     from ..artifacts.poses import read_results
-    from ..datasets import open_dataset
-    from .evaluate import evaluate
-    from .visualize import plot_cases
+    from ..datasets.readers import open_dataset
+    from ..evaluation.evaluate import evaluate
+    from ..evaluation.visualize import plot_cases
 
     cfg = entry.result.config or {}
     data, csv = cfg.get("data"), cfg.get("results")
@@ -361,7 +331,8 @@ def fig7(entry: Entry, root: str | Path = ".", n_good: int = 3, n_bad: int = 3, 
     ds = open_dataset(data, split=cfg.get("split") or "test")
     keys = ds.keys()
     images = keys[: cfg["limit"]] if cfg.get("limit") else keys
-    res = evaluate(ds, read_results(csv), min_px=cfg.get("min_px", 400), threshold=cfg.get("threshold", 0.1), images=images)
+    res = evaluate(ds, read_results(csv), min_px=cfg.get("min_px", MIN_VISIBLE_PX),
+                   threshold=cfg.get("threshold", ADD_THRESHOLD), images=images)
     m = METHOD[entry.method]
     fig = plot_cases(ds, res, n_good=n_good, n_bad=n_bad, ncols=ncols,
                      title=f"{m.label}, {MASKS[entry.masks]}, {SPLITS[entry.split]} split: GT (green), estimate (red)")
@@ -454,7 +425,7 @@ def _best(entries: dict, split: str, masks: str, kind: str) -> tuple[Method | No
         return tied[0], acc
     names = [m.label for m in tied]
     label = " and ".join(names) if len(names) == 2 else f"{names[0]}, {names[1]} and {len(names) - 2} more"
-    return Method(tied[0].key, f"{label} (tied)", kind), acc
+    return Method(tied[0].key, f"{label} (tied)", kind, tied[0].command), acc
 
 
 def macros(entries: dict, profile: str, extra: dict | None = None) -> str:
@@ -594,27 +565,7 @@ def write_macros(entries: dict, profile: str, path, extra: dict | None = None) -
 # --------------------------------------------------------------------------------------------
 # beyond the paper: the synthetic-to-real branch and the pose ablation (other result files of the graph)
 # --------------------------------------------------------------------------------------------
-#: Rows of the real-frames table: (method key after ``<name>_gt_``, label, training data; "" for a hybrid method).
-REAL_METHODS = (
-    ("learned", "learned", "ycbv (kinect depth)"),
-    ("learned_ideal", "learned", "ycbv_ideal (ideal depth)"),
-    ("learned_e12", "learned, 12 epochs", "ycbv (kinect depth)"),
-    ("learned_ideal_e12", "learned, 12 epochs", "ycbv_ideal (ideal depth)"),
-    ("learned_it2", "learned + 2 refinement it.", "ycbv (kinect depth)"),
-    ("learned_ideal_it2", "learned + 2 refinement it.", "ycbv_ideal (ideal depth)"),
-    ("learned_jitter", "learned, colour jitter 0.3", "ycbv (kinect depth)"),
-    ("learned_ideal_jitter", "learned, colour jitter 0.3", "ycbv_ideal (ideal depth)"),
-    ("learned_icp", "learned + ICP", "ycbv (kinect depth)"),
-    ("learned_ideal_icp", "learned + ICP", "ycbv_ideal (ideal depth)"),
-    ("learned_colour", "learned + colour verification", "ycbv (kinect depth)"),
-    ("learned_ideal_colour", "learned + colour verification", "ycbv_ideal (ideal depth)"),
-    ("ransac_icp", "RANSAC + ICP", ""),
-    ("fgr_icp", "FGR + ICP", ""),
-    ("super4pcs_icp", "Super4PCS + ICP", ""),
-)
-
-
-#: The kinect / ideal-depth pairs of :data:`REAL_METHODS` beyond the networks alone (both networks of a pair
+#: The kinect / ideal-depth pairs of :data:`sixdpose.registry.REAL_METHODS` beyond the networks alone (both networks of a pair
 #: trained alike, the same stage after both), for the write-up's sensor sentence: ``(kinect key, ideal key,
 #: what the pair is)``.
 SENSOR_PAIRS = (
@@ -633,12 +584,12 @@ def real_table(results_dir: str | Path, name: str = "ycbv") -> list[dict]:
     """The methods on real frames (``<name>_gt_<method>.json`` of the graph's synthetic-to-real branch):
     rows ``method, trained_on, accuracy, n_gt, ar, adds_auc`` for the results that exist (empty: none)."""
     rows = []
-    for key, label, data in REAL_METHODS:
-        r = _optional(results_dir, f"{name}_gt_{key}")
+    for m in REAL_METHODS:
+        r = _optional(results_dir, f"{name}_gt_{m.key}")
         if r is None:
             continue
         f, b = r.figures, r.figures.get("bop") or {}
-        rows.append({"method": label, "trained_on": data or "--", "accuracy": f.get("accuracy"), "n_gt": f.get("n_gt"),
+        rows.append({"method": m.label, "trained_on": m.trained_on or "--", "accuracy": f.get("accuracy"), "n_gt": f.get("n_gt"),
                      "ar": b.get("ar"), "adds_auc": b.get("adds_auc")})
     return rows
 
@@ -679,11 +630,11 @@ def beyond_findings(results_dir: str | Path, profile: str, name: str = "ycbv") -
     (``finding@ablation``), computed from the result files. Each is a whole sentence (or empty where it
     has nothing to compare), saying so where the profile did not run the results it needs."""
     out = {}
-    real = {k: _optional(results_dir, f"{name}_gt_{k}") for k, _, _ in REAL_METHODS}
+    real = {m.key: _optional(results_dir, f"{name}_gt_{m.key}") for m in REAL_METHODS}
     acc = {k: (r.figures.get("accuracy") if r else None) for k, r in real.items()}
     auc = {k: ((r.figures.get("bop") or {}).get("adds_auc") if r else None) for k, r in real.items()}
     if acc["learned"] is not None:
-        hybrid = [(acc[k], lab) for k, lab, d in REAL_METHODS if not d and acc[k] is not None]
+        hybrid = [(acc[m.key], m.label) for m in REAL_METHODS if m.kind == "hybrid" and acc[m.key] is not None]
         s = (f"The network trained only on generated data reaches {acc['learned']:.2f} % ADD(-S) on "
              f"{real['learned'].figures.get('n_gt')} real instances")
         if acc["learned_colour"] is not None:

@@ -13,9 +13,9 @@ ends with a line naming its result files and their commit, date and hardware.
 
 Usage (from the checkout's root; ``make results-readme`` runs the first form)::
 
-    python -m sixdpose.artifacts.readme            # rewrite the blocks of README.md from results/
-    python -m sixdpose.artifacts.readme --check    # exit status 1 (and say which) if a block differs
-    python -m sixdpose.artifacts.readme --readme README.md --results results
+    python -m sixdpose.reporting.readme            # rewrite the blocks of README.md from results/
+    python -m sixdpose.reporting.readme --check    # exit status 1 (and say which) if a block differs
+    python -m sixdpose.reporting.readme --readme README.md --results results
 
 A missing or corrupt result file, an unknown marker or an unterminated block is one line on stderr and
 exit status 2; the README is then left as it was.
@@ -30,10 +30,11 @@ import re
 import sys
 from pathlib import Path
 
+from ..artifacts.results import Result, machine_text, read_result
 from ..errors import SixdposeError
 from ..fileio import atomic_write_text
-from ..paper import TABLES, paper_figure
-from .results import Result, machine_text, read_result
+from ..registry import REAL_METHODS
+from .paper import TABLES, paper_figure
 
 _OPEN = re.compile(r"^<!-- results:([A-Za-z0-9_./-]+) -->[ \t]*$", re.M)
 _CLOSE = "<!-- /results:{} -->"
@@ -124,10 +125,10 @@ class Source:
 # --------------------------------------------------------------------------------------------
 _T3 = TABLES["III"]
 
-#: Learned-pose evaluations of the ``cpu`` runs on ``data/test``: (label, masks, result, paper method key).
+#: Learned-pose evaluations of the ``cpu`` runs on ``data/test``: (label, masks, result, method key of :data:`sixdpose.registry.METHODS` for the paper column).
 LEARNED_CPU = [
-    ("learned, 0 refinement it.", "GT", "cpu/test_gt_learned_it0", "learned"),
-    ("learned + 2 refinement it.", "GT", "cpu/test_gt_learned_it2", "learned+refine"),
+    ("learned, 0 refinement it.", "GT", "cpu/test_gt_learned_it0", "learned_it0"),
+    ("learned + 2 refinement it.", "GT", "cpu/test_gt_learned_it2", "learned_it2"),
     ("learned + 2 it. + ICP", "GT", "cpu/test_gt_learned_it2_icp", None),
     ("learned + 2 it. + colour verification", "GT", "cpu/test_gt_learned_it2_colour", None),
     ("learned, 0 it.", "predicted (Mask R-CNN `cpu`)", "cpu/test_pred_learned_it0", None),
@@ -160,10 +161,10 @@ def _learned_cpu_per_object(src: Source) -> str:
     return md_table(["obj_id", "object", "GT instances", *[c for c, _ in cols]], rows)
 
 
-#: Hybrid methods on ``data/test`` with ideal and ``kinect`` depth: (label, paper key, ideal, kinect).
+#: Hybrid methods on ``data/test`` with ideal and ``kinect`` depth: (label, method key for the paper column, ideal, kinect).
 DEPTH_NOISE = [
-    ("RANSAC + ICP", "ransac+icp", "cpu/test_gt_ransac_icp", "cpu/test_kinect_gt_ransac_icp"),
-    ("Super4PCS + ICP", "super4pcs+icp", "cpu/test_gt_super4pcs_icp", "cpu/test_kinect_gt_super4pcs_icp"),
+    ("RANSAC + ICP", "ransac_icp", "cpu/test_gt_ransac_icp", "cpu/test_kinect_gt_ransac_icp"),
+    ("Super4PCS + ICP", "super4pcs_icp", "cpu/test_gt_super4pcs_icp", "cpu/test_kinect_gt_super4pcs_icp"),
 ]
 
 
@@ -192,11 +193,9 @@ def _ycbv_bop(src: Source) -> str:
 
 def _ycbv_real():
     """``[(label, training data or "" for a hybrid method, result name)]`` of the real-frame rows, in the
-    order of :data:`sixdpose.evaluation.report.REAL_METHODS` (the write-up's table)."""
-    from ..evaluation.report import REAL_METHODS
-
-    return [(label, f"`{data.split()[0]}` {' '.join(data.split()[1:])}" if data else "", f"cpu/ycbv_gt_{key}")
-            for key, label, data in REAL_METHODS]
+    order of :data:`sixdpose.registry.REAL_METHODS` (the write-up's table)."""
+    return [(m.label, f"`{m.trained_on.split()[0]}` {' '.join(m.trained_on.split()[1:])}" if m.trained_on else "",
+             f"cpu/ycbv_gt_{m.key}") for m in REAL_METHODS]
 
 
 def _ycbv_synthetic_to_real(src: Source) -> str:
@@ -315,7 +314,7 @@ def stale_blocks(readme: str | Path, results_dir: str | Path) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """Rewrite (or with ``--check`` compare) the README's generated blocks; returns the exit status."""
-    ap = argparse.ArgumentParser(prog="python -m sixdpose.artifacts.readme", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m sixdpose.reporting.readme", description=__doc__.splitlines()[0])
     ap.add_argument("--readme", default="README.md", help="the README to rewrite (default: README.md)")
     ap.add_argument("--results", default="results", help="the results directory (default: results)")
     ap.add_argument("--check", action="store_true", help="change nothing; exit status 1 if a block differs")

@@ -1,0 +1,116 @@
+"""The one list of the pose methods and profiles of the ``make reproduce`` graph (base layer: no imports).
+
+The reporting layer (:mod:`sixdpose.reporting`: tables, README blocks, the paper's rows), the comparisons
+of the notebooks and the check of ``mk/reproduce.mk`` / ``mk/profiles.mk`` (``tests/test_layers.py``) all
+read these tuples; nothing else lists the methods.
+
+A method's ``command`` is the ``sixdpose`` subcommand and its arguments as the graph runs it, without the
+data, mask and output arguments; ``{runs}`` stands for the profile's run directory (``runs/<profile>``)
+and ``{workers}`` for the number of worker processes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Method:
+    """A pose method of the graph (one results file per split and mask source).
+
+    Attributes:
+        key: file-name key (``ransac_icp``). label: display name. kind: ``hybrid`` or ``learned``.
+        command: the graph's command line (mk ``CMD_<key>``), see the module docstring.
+        paper_acc: the paper's row label in Tables I and III (None: the paper has no such row).
+        paper_fps: the paper's row label in Table II (None: no such row).
+        few: one of the short list run by the ``smoke`` profile (mk ``FEW_METHODS``).
+    """
+
+    key: str
+    label: str
+    kind: str
+    command: str
+    paper_acc: str | None = None
+    paper_fps: str | None = None
+    few: bool = False
+
+
+#: The methods of the graph, in table order.
+METHODS: tuple[Method, ...] = (
+    Method("ransac", "RANSAC", "hybrid", "register --method ransac"),
+    Method("ransac_icp", "RANSAC + ICP", "hybrid", "register --method ransac --icp", "Ours Hybrid(RANSAC + ICP)",
+           "Ours Hybrid(RANSAC + ICP)", few=True),
+    Method("fgr", "FGR", "hybrid", "register --method fgr", None, "Ours Hybrid(FGR)"),
+    Method("fgr_icp", "FGR + ICP", "hybrid", "register --method fgr --icp", "Ours Hybrid(FGR + ICP)"),
+    Method("super4pcs", "Super4PCS", "hybrid", "register --method super4pcs", "Ours Hybrid(Super4PCS)",
+           "Ours Hybrid(Super4PCS)", few=True),
+    Method("super4pcs_icp", "Super4PCS + ICP", "hybrid", "register --method super4pcs --icp"),
+    Method("learned_it0", "learned, no refinement", "learned", "predict-pose --pose {runs}/pose --iterations 0",
+           "Ours Full Learning (No Refinement)", "Ours Full Learning (No Refinement)", few=True),
+    Method("learned_it2", "learned + 2 refinement it.", "learned",
+           "predict-pose --pose {runs}/pose --refiner {runs}/refiner --iterations 2", "Ours Full Learning (Iterative)",
+           "Ours Full Learning", few=True),
+    Method("learned_it2_icp", "learned + 2 it. + ICP", "learned",
+           "predict-pose --pose {runs}/pose --refiner {runs}/refiner --iterations 2 --icp"),
+    Method("learned_it2_colour", "learned + 2 it. + colour verification", "learned",
+           "predict-pose --pose {runs}/pose --refiner {runs}/refiner --iterations 2 --colour-verify"),
+)
+#: key -> :class:`Method`.
+METHOD: dict[str, Method] = {m.key: m for m in METHODS}
+
+#: The global registration algorithms of the hybrid methods and their display names (paper Tables I-III).
+HYBRID_ALGORITHMS: dict[str, str] = {"ransac": "RANSAC", "fgr": "FGR", "super4pcs": "Super4PCS"}
+
+
+@dataclass(frozen=True)
+class RealMethod:
+    """A method of the synthetic-to-real branch, scored on real frames (``<name>_gt_<key>.json``).
+
+    Attributes:
+        key: the method key after ``<name>_gt_``. label: display name.
+        trained_on: the training data of a learned method (``""`` for a hybrid method, which needs none).
+        command: the graph's command line (mk ``YCBV_CMD_<key>``), see the module docstring.
+    """
+
+    key: str
+    label: str
+    trained_on: str
+    command: str
+
+    @property
+    def kind(self) -> str:
+        """``hybrid`` or ``learned``."""
+        return "learned" if self.trained_on else "hybrid"
+
+
+_KINECT, _IDEAL = "ycbv (kinect depth)", "ycbv_ideal (ideal depth)"
+#: The rows of the real-frames table, in table order.
+REAL_METHODS: tuple[RealMethod, ...] = (
+    RealMethod("learned", "learned", _KINECT, "predict-pose --pose {runs}/pose_ycbv"),
+    RealMethod("learned_ideal", "learned", _IDEAL, "predict-pose --pose {runs}/pose_ycbv_ideal"),
+    RealMethod("learned_e12", "learned, 12 epochs", _KINECT, "predict-pose --pose {runs}/pose_ycbv_e12"),
+    RealMethod("learned_ideal_e12", "learned, 12 epochs", _IDEAL, "predict-pose --pose {runs}/pose_ycbv_ideal_e12"),
+    RealMethod("learned_it2", "learned + 2 refinement it.", _KINECT,
+               "predict-pose --pose {runs}/pose_ycbv --refiner {runs}/refiner_ycbv --iterations 2"),
+    RealMethod("learned_ideal_it2", "learned + 2 refinement it.", _IDEAL,
+               "predict-pose --pose {runs}/pose_ycbv_ideal --refiner {runs}/refiner_ycbv_ideal --iterations 2"),
+    RealMethod("learned_jitter", "learned, colour jitter 0.3", _KINECT, "predict-pose --pose {runs}/pose_ycbv_jitter"),
+    RealMethod("learned_ideal_jitter", "learned, colour jitter 0.3", _IDEAL,
+               "predict-pose --pose {runs}/pose_ycbv_ideal_jitter"),
+    RealMethod("learned_icp", "learned + ICP", _KINECT, "predict-pose --pose {runs}/pose_ycbv --icp"),
+    RealMethod("learned_ideal_icp", "learned + ICP", _IDEAL, "predict-pose --pose {runs}/pose_ycbv_ideal --icp"),
+    RealMethod("learned_colour", "learned + colour verification", _KINECT,
+               "predict-pose --pose {runs}/pose_ycbv --colour-verify"),
+    RealMethod("learned_ideal_colour", "learned + colour verification", _IDEAL,
+               "predict-pose --pose {runs}/pose_ycbv_ideal --colour-verify"),
+    RealMethod("ransac_icp", "RANSAC + ICP", "", "register --method ransac --icp --workers {workers} --min-px 0"),
+    RealMethod("fgr_icp", "FGR + ICP", "", "register --method fgr --icp --workers {workers} --min-px 0"),
+    RealMethod("super4pcs_icp", "Super4PCS + ICP", "",
+               "register --method super4pcs --icp --workers {workers} --min-px 0"),
+)
+
+#: The profiles of the ``make reproduce`` graph (mk/profiles.mk ``PROFILES``), smallest first.
+GRAPH_PROFILES: tuple[str, ...] = ("smoke", "demo", "cpu", "paper")
+
+#: The training profiles of the learned stages (``train-seg``, ``train-pose``, ``train-refiner --profile``).
+STAGE_PROFILES: tuple[str, ...] = ("smoke", "cpu", "paper")
