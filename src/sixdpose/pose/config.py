@@ -31,7 +31,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..config import Config, from_profile
+from ..config import from_profile
+from ..training.schedule import TrainSchedule
 
 TRANSLATIONS = ("absolute", "centroid_offset")
 ROTATIONS = ("quaternion", "6d")
@@ -39,26 +40,17 @@ NORMS = ("none", "group", "batch")
 
 
 def _common_checks(c) -> None:
-    if c.epochs < 1:
-        raise ValueError(f"epochs must be >= 1, got {c.epochs}")
-    if c.batch_size < 1:
-        raise ValueError(f"batch_size must be >= 1, got {c.batch_size}")
-    if not c.lr > 0:
-        raise ValueError(f"lr must be > 0, got {c.lr}")
-    if c.lr_step_epochs < 1 or not 0 < c.lr_gamma <= 1:
-        raise ValueError("lr_step_epochs must be >= 1 and lr_gamma in (0, 1]")
+    TrainSchedule.validate(c)
     if c.num_points < 1 or c.num_model_points < 1:
         raise ValueError("num_points and num_model_points must be >= 1")
     if c.repeat < 1:
         raise ValueError(f"repeat must be >= 1, got {c.repeat}")
-    if c.time_budget < 0:
-        raise ValueError(f"time_budget must be >= 0 (0: none), got {c.time_budget}")
     if c.max_images < 0:
         raise ValueError(f"max_images must be >= 0 (0: all), got {c.max_images}")
 
 
 @dataclass(frozen=True)
-class PoseConfig(Config):
+class PoseConfig(TrainSchedule):
     """Every setting of a main pose network run (see the module docstring for the profiles).
 
     Model:
@@ -87,19 +79,17 @@ class PoseConfig(Config):
             (:func:`~sixdpose.pose.data.normalise_images`).
         max_images: train on the first N images only (0: all; the smoke profile uses a handful).
         repeat: each image is visited ``repeat`` times per epoch.
-        num_workers: data-loading worker processes.
 
-    Optimisation:
-        epochs, batch_size (images per step and process; every instance of each image is in the
-        step), lr (Adam), warmup_steps (exponential warm-up from lr/1000 to lr; 0: none),
-        lr_step_epochs and lr_gamma (learning rate x lr_gamma every lr_step_epochs epochs, i.e. a
-        per-epoch StepLR), weight_decay, grad_clip (max gradient norm, 0: off), amp (mixed precision,
-        CUDA only), time_budget (seconds; 0 = none; checked after every step: once spent, the rest of
-        the epoch is skipped, the epoch is validated and checkpointed as done and training stops).
+    Schedule (:class:`~sixdpose.training.schedule.TrainSchedule`, shared by every network): epochs,
+        batch_size (images per step and process; every instance of each image is in the step), lr
+        (Adam; 1e-4 here), warmup_steps (exponential warm-up from lr/1000 to lr; 1000 here),
+        lr_step_epochs and lr_gamma (learning rate x lr_gamma every lr_step_epochs epochs; 5 here),
+        weight_decay, grad_clip, amp, time_budget (seconds; once spent the epoch is validated and
+        checkpointed as done and training stops), max_steps_per_epoch, seed, num_workers,
+        num_threads, log_every.
 
     Misc:
-        profile: the profile the config came from. seed: initialisation, shuffling and sampling.
-        num_threads: torch CPU threads (0: torch default). log_every: steps between metrics rows.
+        profile: the profile the config came from.
     """
 
     profile: str = "paper"
@@ -117,20 +107,9 @@ class PoseConfig(Config):
     colour_jitter: float = 0.0
     max_images: int = 0
     repeat: int = 1
-    num_workers: int = 2
-    epochs: int = 100
-    batch_size: int = 8
     lr: float = 1e-4
     warmup_steps: int = 1000
     lr_step_epochs: int = 5
-    lr_gamma: float = 0.6
-    weight_decay: float = 0.0
-    grad_clip: float = 0.0
-    amp: bool = True
-    time_budget: float = 0.0
-    seed: int = 0
-    num_threads: int = 0
-    log_every: int = 10
 
     def validate(self) -> None:
         """Check every field (ValueError naming the field)."""
@@ -156,7 +135,7 @@ class PoseConfig(Config):
 
 
 @dataclass(frozen=True)
-class RefinerConfig(Config):
+class RefinerConfig(TrainSchedule):
     """Every setting of an iterative-refiner run (trained on a finished main network's poses).
 
     Model:
@@ -166,10 +145,12 @@ class RefinerConfig(Config):
     Noise (added to the main net's poses in training; see the module docstring):
         noise_rot_deg: std of the rotation angle (degrees) about a random axis.
         noise_trans: std of the translation offset per axis (metres).
-    Data and optimisation: num_points, num_model_points, min_points, max_images, repeat,
-        num_workers, epochs, batch_size, lr, warmup_steps, lr_step_epochs, lr_gamma, weight_decay,
-        grad_clip, amp, time_budget as in :class:`PoseConfig`.
-    Misc: profile, seed, num_threads, log_every as in :class:`PoseConfig`.
+    Data: num_points, num_model_points, min_points, max_images, repeat as in :class:`PoseConfig`.
+    Schedule (:class:`~sixdpose.training.schedule.TrainSchedule`, its defaults: lr 1e-3, no warm-up,
+        x0.6 every 10 epochs): epochs, batch_size, lr, warmup_steps, lr_step_epochs, lr_gamma,
+        weight_decay, grad_clip, amp, time_budget, max_steps_per_epoch, seed, num_workers,
+        num_threads, log_every.
+    Misc: profile as in :class:`PoseConfig`.
     """
 
     profile: str = "paper"
@@ -182,20 +163,6 @@ class RefinerConfig(Config):
     min_points: int = 10
     max_images: int = 0
     repeat: int = 1
-    num_workers: int = 2
-    epochs: int = 100
-    batch_size: int = 8
-    lr: float = 1e-3
-    warmup_steps: int = 0
-    lr_step_epochs: int = 10
-    lr_gamma: float = 0.6
-    weight_decay: float = 0.0
-    grad_clip: float = 0.0
-    amp: bool = True
-    time_budget: float = 0.0
-    seed: int = 0
-    num_threads: int = 0
-    log_every: int = 10
 
     def validate(self) -> None:
         """Check every field (ValueError naming the field)."""
