@@ -15,8 +15,8 @@ Run directory ``RUN_DIR`` after training::
 Optimisation follows the paper (section IV-A): Adam, LR decayed by ``lr_gamma`` every
 ``lr_step_epochs`` epochs (the engine's schedule, :func:`sixdpose.training.learning_rate`). On CUDA,
 mixed precision is used when ``amp`` is set. Under ``torchrun`` (``WORLD_SIZE > 1``) each process trains
-on its shard of every epoch's permutation with ``DistributedDataParallel`` (NCCL on GPUs, gloo on CPU);
-``batch_size`` is per process, only rank 0 writes files.
+on its shard of every epoch's permutation, gradients averaged over processes (NCCL on GPUs, gloo on
+CPU); ``batch_size`` is per process, only rank 0 writes files.
 """
 
 from __future__ import annotations
