@@ -39,18 +39,40 @@ ROTATIONS = ("quaternion", "6d")
 NORMS = ("none", "group", "batch")
 
 
-def _common_checks(c) -> None:
-    TrainSchedule.validate(c)
-    if c.num_points < 1 or c.num_model_points < 1:
-        raise ValueError("num_points and num_model_points must be >= 1")
-    if c.repeat < 1:
-        raise ValueError(f"repeat must be >= 1, got {c.repeat}")
-    if c.max_images < 0:
-        raise ValueError(f"max_images must be >= 0 (0: all), got {c.max_images}")
+@dataclass(frozen=True)
+class FrameSchedule(TrainSchedule):
+    """The training schedule plus the frame sampling that both pose networks share (base of
+    :class:`PoseConfig` and :class:`RefinerConfig`, where the fields are described).
+
+    Schedule: epochs, batch_size, lr, warmup_steps, lr_step_epochs, lr_gamma, weight_decay, grad_clip,
+        amp, time_budget, max_steps_per_epoch, seed, num_workers, num_threads, log_every
+        (:class:`~sixdpose.training.schedule.TrainSchedule`).
+    Frames: num_points, num_model_points, min_points, max_images, repeat.
+    Model: width (channel multiplier, > 0).
+    """
+
+    width: float = 1.0
+    num_points: int = 500
+    num_model_points: int = 500
+    min_points: int = 10
+    max_images: int = 0
+    repeat: int = 1
+
+    def validate(self) -> None:
+        """Check the schedule and frame fields (ValueError naming the field)."""
+        super().validate()
+        if not self.width > 0:
+            raise ValueError(f"width must be > 0, got {self.width}")
+        if self.num_points < 1 or self.num_model_points < 1 or self.min_points < 1:
+            raise ValueError("num_points, num_model_points and min_points must be >= 1")
+        if self.repeat < 1:
+            raise ValueError(f"repeat must be >= 1, got {self.repeat}")
+        if self.max_images < 0:
+            raise ValueError(f"max_images must be >= 0 (0: all), got {self.max_images}")
 
 
 @dataclass(frozen=True)
-class PoseConfig(TrainSchedule):
+class PoseConfig(FrameSchedule):
     """Every setting of a main pose network run (see the module docstring for the profiles).
 
     Model:
@@ -93,29 +115,21 @@ class PoseConfig(TrainSchedule):
     """
 
     profile: str = "paper"
-    width: float = 1.0
     emb_dim: int = 32
     crop: int = 0
     crop_margin: float = 0.1
     translation: str = "absolute"
     rotation: str = "quaternion"
     norm: str = "none"
-    num_points: int = 500
-    num_model_points: int = 500
-    min_points: int = 10
     rgb_noise: float = 0.3
     colour_jitter: float = 0.0
-    max_images: int = 0
-    repeat: int = 1
     lr: float = 1e-4
     warmup_steps: int = 1000
     lr_step_epochs: int = 5
 
     def validate(self) -> None:
         """Check every field (ValueError naming the field)."""
-        _common_checks(self)
-        if not self.width > 0:
-            raise ValueError(f"width must be > 0, got {self.width}")
+        super().validate()
         if self.crop < 0 or self.crop % 8:
             raise ValueError(f"crop must be 0 or a positive multiple of 8, got {self.crop}")
         if self.translation not in TRANSLATIONS:
@@ -124,8 +138,8 @@ class PoseConfig(TrainSchedule):
             raise ValueError(f"rotation must be one of {ROTATIONS}, got {self.rotation!r}")
         if self.norm not in NORMS:
             raise ValueError(f"norm must be one of {NORMS}, got {self.norm!r}")
-        if self.emb_dim < 1 or self.min_points < 1 or self.warmup_steps < 0 or self.rgb_noise < 0:
-            raise ValueError("emb_dim, min_points must be >= 1; warmup_steps, rgb_noise >= 0")
+        if self.emb_dim < 1 or self.rgb_noise < 0:
+            raise ValueError("emb_dim must be >= 1 and rgb_noise >= 0")
         if not 0 <= self.colour_jitter < 1:
             raise ValueError(f"colour_jitter must be in [0, 1), got {self.colour_jitter}")
 
@@ -135,7 +149,7 @@ class PoseConfig(TrainSchedule):
 
 
 @dataclass(frozen=True)
-class RefinerConfig(TrainSchedule):
+class RefinerConfig(FrameSchedule):
     """Every setting of an iterative-refiner run (trained on a finished main network's poses).
 
     Model:
@@ -154,21 +168,13 @@ class RefinerConfig(TrainSchedule):
     """
 
     profile: str = "paper"
-    width: float = 1.0
     iterations: int = 2
     noise_rot_deg: float = 15.0
     noise_trans: float = 0.02
-    num_points: int = 500
-    num_model_points: int = 500
-    min_points: int = 10
-    max_images: int = 0
-    repeat: int = 1
 
     def validate(self) -> None:
         """Check every field (ValueError naming the field)."""
-        _common_checks(self)
-        if not self.width > 0:
-            raise ValueError(f"width must be > 0, got {self.width}")
+        super().validate()
         if self.iterations < 1:
             raise ValueError(f"iterations must be >= 1, got {self.iterations}")
         if self.noise_rot_deg < 0 or self.noise_trans < 0:

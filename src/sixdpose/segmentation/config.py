@@ -105,8 +105,8 @@ class SegConfig(TrainSchedule):
     grad_clip: float = 10.0
     log_every: int = 1
     # data
-    val_fraction: float = 0.1
     split_by: str = "image"
+    val_fraction: float = 0.1
     train_split: str = "train"
     test_split: str = "test"
     min_mask_pixels: int = 1
