@@ -153,9 +153,14 @@ class PoseTask(TrainTask):
             net = build_refiner(cfg, len(classes), int(pose_ckpt["arch"]["emb_dim"]))
         self.val_reader = as_reader(self.val, split="test") if self.val is not None else None
         keys = reader.keys()[: cfg.max_images] if cfg.max_images else reader.keys()
-        ds = FrameDataset(reader, list(keys) * cfg.repeat, cfg, self.class_index, crop, margin, masks=self.masks,
-                          seed=cfg.seed)
+        self.frames = ds = FrameDataset(reader, list(keys) * cfg.repeat, cfg, self.class_index, crop, margin,
+                                        masks=self.masks, seed=cfg.seed)
         return net.to(device), ds
+
+    def start_epoch(self, epoch, model, net):
+        """The epoch's sampling draws of every frame; training mode."""
+        self.frames.set_epoch(epoch)
+        net.train()
 
     def collate(self, items):
         """Frames as a list (collated per step, with the step's random draws)."""

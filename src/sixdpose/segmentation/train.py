@@ -89,7 +89,7 @@ class SegTask(TrainTask):
         self.classes = ClassMap.from_list(self.split["classes"])
         self.classes.check_compatible(ds)
         self.res = ScanResult.from_dict(self.split["scan"])
-        view = TrainView(ds, self.res.usable, self.classes, cfg, train=True)
+        self.view = view = TrainView(ds, self.res.usable, self.classes, cfg, train=True)
         init = None if last is None else last.get("init", "random")
         model, self.init = build_model(cfg, len(self.classes), init=init, verbose=rank == 0)
         self.cfg = cfg
@@ -99,8 +99,9 @@ class SegTask(TrainTask):
         """Images and targets as lists."""
         return collate(items)
 
-    def train_mode(self, model, net):
-        """Training mode with the multi-scale training sizes."""
+    def start_epoch(self, epoch, model, net):
+        """The epoch's augmentation draws; training mode with the multi-scale training sizes."""
+        self.view.set_epoch(epoch)
         net.train()
         set_train_sizes(model, self.cfg, training=True)
 

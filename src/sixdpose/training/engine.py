@@ -134,7 +134,7 @@ class TrainTask:
 
         Returns:
             ``(model, dataset)``: the module whose trainable parameters are optimised, and a map-style
-            dataset of training items (with an optional ``set_epoch(epoch)``).
+            dataset of training items.
         """
         raise NotImplementedError
 
@@ -142,8 +142,9 @@ class TrainTask:
         """``collate_fn`` of the data loader (default: the list of items)."""
         return items
 
-    def train_mode(self, model, net) -> None:
-        """Put the model in training mode at the start of every epoch (``net``: the DDP wrapper or ``model``)."""
+    def start_epoch(self, epoch: int, model, net) -> None:
+        """Start ``epoch``: select the dataset's random draws of the epoch (if it has any) and put the model in
+        training mode (``net``: the DDP wrapper or ``model``). Default: ``net.train()``."""
         net.train()
 
     def step(self, net, batch, ctx: StepContext) -> dict | None:
@@ -296,13 +297,11 @@ def _train(task, run_dir, resume, profile, cfg, overrides, dev, world, rank, pro
     done = start_epoch
     for epoch in range(start_epoch, cfg.epochs):
         t_epoch = time.time()
-        if hasattr(dataset, "set_epoch"):
-            dataset.set_epoch(epoch)
         loader = torch.utils.data.DataLoader(dataset, batch_size=cfg.batch_size,
                                              sampler=shard(len(dataset), epoch, cfg.seed, rank, world),
                                              num_workers=cfg.num_workers, collate_fn=task.collate,
                                              pin_memory=dev.type == "cuda")
-        task.train_mode(model, net)
+        task.start_epoch(epoch, model, net)
         bar = None
         if progress and rank == 0:
             from tqdm.auto import tqdm

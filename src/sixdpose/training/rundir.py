@@ -84,7 +84,7 @@ def data_fingerprint(reader, extra=None) -> str:
     h = hashlib.sha256()
     keys = reader.keys()
     head = {"keys": [list(map(int, k)) for k in keys], "objects": sorted(map(int, reader.object_ids)),
-            "manifest": getattr(reader, "manifest", {}) or {}, "extra": extra}
+            "manifest": reader.manifest or {}, "extra": extra}
     h.update(json.dumps(head, sort_keys=True, default=str).encode())
     root = Path(reader.location)
     if root.is_dir():
