@@ -137,6 +137,11 @@ def test_interrupted_run_resumes_to_the_uninterrupted_result(task, pose_ds, toy,
         assert main(argv) == 0
     unfinished = [w for w in warnings if "unfinished run" in w]
     assert len(unfinished) == 1 and "epoch 1 of 2" in unfinished[0] and str(run) in unfinished[0], warnings
+    if task == "pose":  # a refiner trained on the unfinished main network: the same one line
+        warnings.clear()
+        assert main(["train-refiner", "--pose", str(run), "--data", str(pose_ds), "--out", str(tmp_path / "refiner"),
+                     "--profile", "smoke", "--set", "epochs=1", "--set", "repeat=1", "--no-progress"]) == 0
+        assert sum("unfinished run" in w for w in warnings) == 1, warnings
 
     s = train(run, resume=True, progress=False)
     assert s["start_epoch"] == 1 and s["epochs"] == 2 and s["steps"] == steps_per_epoch

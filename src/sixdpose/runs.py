@@ -122,8 +122,8 @@ def load_checkpoint(path: str | Path, fmt: str, version: int, required: tuple[st
             raise error(f"{path}: incomplete checkpoint (no {key!r})")
     if run_dir is not None and path.name == LAST and dist_info()[1] == 0:  # said once, by rank 0
         planned = ckpt.get("config", {}).get("epochs") if isinstance(ckpt.get("config"), dict) else None
-        log.warning("%s: unfinished run (no %s): using its %s of epoch %s%s", run_dir, FINAL, LAST, ckpt.get("epoch"),
-                    f" of {planned}" if planned else "")
+        log.warning("%s: unfinished run (no %s; last completed epoch %s%s): using its %s", run_dir, FINAL,
+                    ckpt.get("epoch"), f" of {planned}" if planned else "", LAST)
     return ckpt
 
 
