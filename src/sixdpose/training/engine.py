@@ -24,6 +24,13 @@ everything else, the same way for all:
   epoch ends, is checkpointed and training stops with the final model;
 * outputs (rank 0 alone writes): ``metrics.csv`` rows, ``last.pt`` after every epoch, ``model.pt``
   at the end, ``status.json`` and ``run.json``; a rank-0 setup error is raised on every rank.
+
+Adding a network (e.g. a dense head): derive its config from
+:class:`~sixdpose.training.schedule.TrainSchedule`, subclass :class:`TrainTask` with ``new_config``,
+``open`` (optional), ``prepare``, ``load_checkpoint``, ``setup``, ``step`` and ``checkpoint_header``
+(``collate``, ``start_epoch``, ``validate``, ``run_info`` when the defaults do not fit), and call
+``train(task, run_dir, ...)`` from the stage's entry point (see :class:`sixdpose.pose.train.PoseTask`
+and :class:`sixdpose.segmentation.train.SegTask`).
 """
 
 from __future__ import annotations
