@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import logging
 import os
 import random
 import sys
@@ -22,6 +23,8 @@ from .fileio import atomic_path
 #: Checkpoint file names of a run directory: resumable state after each epoch, and the final model.
 LAST = "last.pt"
 FINAL = "model.pt"
+
+log = logging.getLogger("sixdpose.runs")
 
 
 class RunError(SixdposeError):
@@ -97,9 +100,13 @@ def load_checkpoint(path: str | Path, fmt: str, version: int, required: tuple[st
     Args:
         fmt: the expected ``format`` entry. version: the expected ``version``. required: keys it must
         have. what: words for messages (``"segmentation"``). error: exception class to raise.
+    A run directory without :data:`FINAL` (an unfinished run) is used through its :data:`LAST` with one
+    warning line naming its last completed epoch.
+
     Raises:
         ``error``: missing, corrupt, another format or version, or incomplete (the message names the file).
     """
+    run_dir = Path(path) if Path(path).is_dir() else None
     path = resolve_checkpoint(path, error)
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
@@ -113,6 +120,10 @@ def load_checkpoint(path: str | Path, fmt: str, version: int, required: tuple[st
     for key in required:
         if key not in ckpt:
             raise error(f"{path}: incomplete checkpoint (no {key!r})")
+    if run_dir is not None and path.name == LAST and dist_info()[1] == 0:  # said once, by rank 0
+        planned = ckpt.get("config", {}).get("epochs") if isinstance(ckpt.get("config"), dict) else None
+        log.warning("%s: unfinished run (no %s; last completed epoch %s%s): using its %s", run_dir, FINAL,
+                    ckpt.get("epoch"), f" of {planned}" if planned else "", LAST)
     return ckpt
 
 

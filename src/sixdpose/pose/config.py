@@ -31,34 +31,48 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..config import Config, from_profile
+from ..config import from_profile
+from ..training.schedule import TrainSchedule
 
 TRANSLATIONS = ("absolute", "centroid_offset")
 ROTATIONS = ("quaternion", "6d")
 NORMS = ("none", "group", "batch")
 
 
-def _common_checks(c) -> None:
-    if c.epochs < 1:
-        raise ValueError(f"epochs must be >= 1, got {c.epochs}")
-    if c.batch_size < 1:
-        raise ValueError(f"batch_size must be >= 1, got {c.batch_size}")
-    if not c.lr > 0:
-        raise ValueError(f"lr must be > 0, got {c.lr}")
-    if c.lr_step_epochs < 1 or not 0 < c.lr_gamma <= 1:
-        raise ValueError("lr_step_epochs must be >= 1 and lr_gamma in (0, 1]")
-    if c.num_points < 1 or c.num_model_points < 1:
-        raise ValueError("num_points and num_model_points must be >= 1")
-    if c.repeat < 1:
-        raise ValueError(f"repeat must be >= 1, got {c.repeat}")
-    if c.time_budget < 0:
-        raise ValueError(f"time_budget must be >= 0 (0: none), got {c.time_budget}")
-    if c.max_images < 0:
-        raise ValueError(f"max_images must be >= 0 (0: all), got {c.max_images}")
+@dataclass(frozen=True)
+class FrameSchedule(TrainSchedule):
+    """The training schedule plus the frame sampling that both pose networks share (base of
+    :class:`PoseConfig` and :class:`RefinerConfig`, where the fields are described).
+
+    Schedule: epochs, batch_size, lr, warmup_steps, lr_step_epochs, lr_gamma, weight_decay, grad_clip,
+        amp, time_budget, max_steps_per_epoch, seed, num_workers, num_threads, log_every
+        (:class:`~sixdpose.training.schedule.TrainSchedule`).
+    Frames: num_points, num_model_points, min_points, max_images, repeat.
+    Model: width (channel multiplier, > 0).
+    """
+
+    width: float = 1.0
+    num_points: int = 500
+    num_model_points: int = 500
+    min_points: int = 10
+    max_images: int = 0
+    repeat: int = 1
+
+    def validate(self) -> None:
+        """Check the schedule and frame fields (ValueError naming the field)."""
+        super().validate()
+        if not self.width > 0:
+            raise ValueError(f"width must be > 0, got {self.width}")
+        if self.num_points < 1 or self.num_model_points < 1 or self.min_points < 1:
+            raise ValueError("num_points, num_model_points and min_points must be >= 1")
+        if self.repeat < 1:
+            raise ValueError(f"repeat must be >= 1, got {self.repeat}")
+        if self.max_images < 0:
+            raise ValueError(f"max_images must be >= 0 (0: all), got {self.max_images}")
 
 
 @dataclass(frozen=True)
-class PoseConfig(Config):
+class PoseConfig(FrameSchedule):
     """Every setting of a main pose network run (see the module docstring for the profiles).
 
     Model:
@@ -87,56 +101,35 @@ class PoseConfig(Config):
             (:func:`~sixdpose.pose.data.normalise_images`).
         max_images: train on the first N images only (0: all; the smoke profile uses a handful).
         repeat: each image is visited ``repeat`` times per epoch.
-        num_workers: data-loading worker processes.
 
-    Optimisation:
-        epochs, batch_size (images per step and process; every instance of each image is in the
-        step), lr (Adam), warmup_steps (exponential warm-up from lr/1000 to lr; 0: none),
-        lr_step_epochs and lr_gamma (learning rate x lr_gamma every lr_step_epochs epochs, i.e. a
-        per-epoch StepLR), weight_decay, grad_clip (max gradient norm, 0: off), amp (mixed precision,
-        CUDA only), time_budget (seconds; 0 = none; checked after every step: once spent, the rest of
-        the epoch is skipped, the epoch is validated and checkpointed as done and training stops).
+    Schedule (:class:`~sixdpose.training.schedule.TrainSchedule`, shared by every network): epochs,
+        batch_size (images per step and process; every instance of each image is in the step), lr
+        (Adam; 1e-4 here), warmup_steps (exponential warm-up from lr/1000 to lr; 1000 here),
+        lr_step_epochs and lr_gamma (learning rate x lr_gamma every lr_step_epochs epochs; 5 here),
+        weight_decay, grad_clip, amp, time_budget (seconds; once spent the epoch is validated and
+        checkpointed as done and training stops), max_steps_per_epoch, seed, num_workers,
+        num_threads, log_every.
 
     Misc:
-        profile: the profile the config came from. seed: initialisation, shuffling and sampling.
-        num_threads: torch CPU threads (0: torch default). log_every: steps between metrics rows.
+        profile: the profile the config came from.
     """
 
     profile: str = "paper"
-    width: float = 1.0
     emb_dim: int = 32
     crop: int = 0
     crop_margin: float = 0.1
     translation: str = "absolute"
     rotation: str = "quaternion"
     norm: str = "none"
-    num_points: int = 500
-    num_model_points: int = 500
-    min_points: int = 10
     rgb_noise: float = 0.3
     colour_jitter: float = 0.0
-    max_images: int = 0
-    repeat: int = 1
-    num_workers: int = 2
-    epochs: int = 100
-    batch_size: int = 8
     lr: float = 1e-4
     warmup_steps: int = 1000
     lr_step_epochs: int = 5
-    lr_gamma: float = 0.6
-    weight_decay: float = 0.0
-    grad_clip: float = 0.0
-    amp: bool = True
-    time_budget: float = 0.0
-    seed: int = 0
-    num_threads: int = 0
-    log_every: int = 10
 
     def validate(self) -> None:
         """Check every field (ValueError naming the field)."""
-        _common_checks(self)
-        if not self.width > 0:
-            raise ValueError(f"width must be > 0, got {self.width}")
+        super().validate()
         if self.crop < 0 or self.crop % 8:
             raise ValueError(f"crop must be 0 or a positive multiple of 8, got {self.crop}")
         if self.translation not in TRANSLATIONS:
@@ -145,8 +138,8 @@ class PoseConfig(Config):
             raise ValueError(f"rotation must be one of {ROTATIONS}, got {self.rotation!r}")
         if self.norm not in NORMS:
             raise ValueError(f"norm must be one of {NORMS}, got {self.norm!r}")
-        if self.emb_dim < 1 or self.min_points < 1 or self.warmup_steps < 0 or self.rgb_noise < 0:
-            raise ValueError("emb_dim, min_points must be >= 1; warmup_steps, rgb_noise >= 0")
+        if self.emb_dim < 1 or self.rgb_noise < 0:
+            raise ValueError("emb_dim must be >= 1 and rgb_noise >= 0")
         if not 0 <= self.colour_jitter < 1:
             raise ValueError(f"colour_jitter must be in [0, 1), got {self.colour_jitter}")
 
@@ -156,7 +149,7 @@ class PoseConfig(Config):
 
 
 @dataclass(frozen=True)
-class RefinerConfig(Config):
+class RefinerConfig(FrameSchedule):
     """Every setting of an iterative-refiner run (trained on a finished main network's poses).
 
     Model:
@@ -166,42 +159,22 @@ class RefinerConfig(Config):
     Noise (added to the main net's poses in training; see the module docstring):
         noise_rot_deg: std of the rotation angle (degrees) about a random axis.
         noise_trans: std of the translation offset per axis (metres).
-    Data and optimisation: num_points, num_model_points, min_points, max_images, repeat,
-        num_workers, epochs, batch_size, lr, warmup_steps, lr_step_epochs, lr_gamma, weight_decay,
-        grad_clip, amp, time_budget as in :class:`PoseConfig`.
-    Misc: profile, seed, num_threads, log_every as in :class:`PoseConfig`.
+    Data: num_points, num_model_points, min_points, max_images, repeat as in :class:`PoseConfig`.
+    Schedule (:class:`~sixdpose.training.schedule.TrainSchedule`, its defaults: lr 1e-3, no warm-up,
+        x0.6 every 10 epochs): epochs, batch_size, lr, warmup_steps, lr_step_epochs, lr_gamma,
+        weight_decay, grad_clip, amp, time_budget, max_steps_per_epoch, seed, num_workers,
+        num_threads, log_every.
+    Misc: profile as in :class:`PoseConfig`.
     """
 
     profile: str = "paper"
-    width: float = 1.0
     iterations: int = 2
     noise_rot_deg: float = 15.0
     noise_trans: float = 0.02
-    num_points: int = 500
-    num_model_points: int = 500
-    min_points: int = 10
-    max_images: int = 0
-    repeat: int = 1
-    num_workers: int = 2
-    epochs: int = 100
-    batch_size: int = 8
-    lr: float = 1e-3
-    warmup_steps: int = 0
-    lr_step_epochs: int = 10
-    lr_gamma: float = 0.6
-    weight_decay: float = 0.0
-    grad_clip: float = 0.0
-    amp: bool = True
-    time_budget: float = 0.0
-    seed: int = 0
-    num_threads: int = 0
-    log_every: int = 10
 
     def validate(self) -> None:
         """Check every field (ValueError naming the field)."""
-        _common_checks(self)
-        if not self.width > 0:
-            raise ValueError(f"width must be > 0, got {self.width}")
+        super().validate()
         if self.iterations < 1:
             raise ValueError(f"iterations must be >= 1, got {self.iterations}")
         if self.noise_rot_deg < 0 or self.noise_trans < 0:

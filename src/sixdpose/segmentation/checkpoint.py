@@ -1,14 +1,16 @@
 """Checkpoint files of a segmentation run: atomic writes, validated reads.
 
 ``RUN_DIR/last.pt`` (rewritten after every epoch) holds everything needed to resume: model,
-optimizer, LR scheduler, AMP grad-scaler and the RNG states of every process. ``RUN_DIR/model.pt``
+optimizer, AMP grad-scaler, global step and the RNG states of every process. ``RUN_DIR/model.pt``
 (written when training finishes) holds the weights and what inference needs. Both are plain
 dictionaries readable with ``torch.load(..., weights_only=True)``::
 
     format: "sixdpose-seg"     version: CHECKPOINT_VERSION
     config: SegConfig.to_dict()   classes: [[obj_id, name], ...]   init: "imagenet" | "random"
-    epoch: completed epochs        model: state_dict
-    (last.pt only) optimizer, scheduler, scaler, rng: [per-rank state], world_size
+    epoch: completed epochs        global_step, elapsed (training seconds)     model: state_dict
+    (last.pt only) optimizer, scaler, rng: [per-rank state], world_size
+    (runs of older versions also have a ``scheduler`` entry, ignored: the learning rate is a function
+    of epoch and step, :func:`sixdpose.training.learning_rate`)
 """
 
 from __future__ import annotations

@@ -33,12 +33,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..config import Config, from_profile
+from ..config import from_profile
 from ..constants import DETECTION_SCORE_FLOOR
+from ..training.schedule import TrainSchedule
 
 
 @dataclass(frozen=True)
-class SegConfig(Config):
+class SegConfig(TrainSchedule):
     """Every setting of a segmentation run (see the module docstring for the named profiles).
 
     Model:
@@ -59,10 +60,11 @@ class SegConfig(Config):
         score_thresh: minimum score of a returned detection (low, so AP sees the full curve;
             consumers of the masks apply their own threshold).
 
-    Optimisation:
-        epochs, batch_size (per process), lr, lr_step_epochs, lr_gamma, weight_decay, grad_clip
-        (max gradient norm; 0 disables), max_steps_per_epoch (0 = full epochs), amp (mixed precision,
-        only on CUDA).
+    Schedule (:class:`~sixdpose.training.schedule.TrainSchedule`, shared by every network): epochs,
+        batch_size (images per step and process; 4 here), lr, warmup_steps, lr_step_epochs and
+        lr_gamma (x0.1 every 30 epochs here, the paper's decay), weight_decay, grad_clip (10 here),
+        amp, time_budget, max_steps_per_epoch, seed (also the split), num_workers, num_threads,
+        log_every (1 here).
 
     Data:
         val_fraction: share of synthetic images held out for testing (seeded random split).
@@ -72,12 +74,9 @@ class SegConfig(Config):
         color_jitter: (brightness, contrast, saturation, hue) strengths; all 0 disables it.
         hflip_prob: horizontal flip probability (0: mirrored text and handedness would teach wrong
             appearances; not used by the paper).
-        num_workers: data-loading worker processes.
 
     Misc:
-        seed: seeds the split, the model initialisation, sampling and augmentation.
-        num_threads: torch CPU threads per process (0 = torch default).
-        log_every: steps between CSV rows of the metrics log.
+        profile: the profile the config came from.
     """
 
     profile: str = "paper"
@@ -100,32 +99,24 @@ class SegConfig(Config):
     box_batch_size: int = 512
     detections_per_img: int = 100
     score_thresh: float = DETECTION_SCORE_FLOOR
-    # optimisation
-    epochs: int = 100
+    # schedule defaults that differ from TrainSchedule's
     batch_size: int = 4
-    lr: float = 1e-3
     lr_step_epochs: int = 30
     lr_gamma: float = 0.1
-    weight_decay: float = 0.0
     grad_clip: float = 10.0
-    max_steps_per_epoch: int = 0
-    amp: bool = True
+    log_every: int = 1
     # data
-    val_fraction: float = 0.1
     split_by: str = "image"
+    val_fraction: float = 0.1
     train_split: str = "train"
     test_split: str = "test"
     min_mask_pixels: int = 1
     color_jitter: tuple[float, float, float, float] = (0.3, 0.3, 0.3, 0.03)
     hflip_prob: float = 0.0
-    num_workers: int = 2
-    # misc
-    seed: int = 0
-    num_threads: int = 0
-    log_every: int = 1
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first invalid field."""
+        super().validate()
         if self.backbone not in BACKBONES:
             raise ValueError(f"backbone: {self.backbone!r} is not one of {sorted(BACKBONES)}")
         if not 0 <= self.trainable_layers <= 5:
@@ -134,7 +125,7 @@ class SegConfig(Config):
             raise ValueError(f"val_fraction: {self.val_fraction} is not in [0, 1)")
         if self.split_by not in ("image", "scene"):
             raise ValueError(f"split_by: {self.split_by!r} is not 'image' or 'scene'")
-        for name in ("epochs", "batch_size", "min_size", "max_size", "lr_step_epochs", "log_every"):
+        for name in ("min_size", "max_size"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name}: must be >= 1, got {getattr(self, name)}")
         if len(self.anchor_sizes) != 5:

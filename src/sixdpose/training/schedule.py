@@ -1,0 +1,80 @@
+"""The training schedule shared by every network's config, and its learning-rate rule.
+
+:class:`TrainSchedule` holds the optimisation, budget and process fields that the pose, refiner and
+segmentation configs have in common; each of them derives from it (so ``--set epochs=6``,
+``--set lr=1e-4``, ``--set time_budget=0`` and the flat keys of every saved ``config.json`` keep
+working) and only re-declares the defaults that differ.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..config import Config
+
+#: Schedule fields a ``--resume`` may change (they do not alter what an epoch computes).
+RESUMABLE = ("epochs", "time_budget", "num_threads", "num_workers", "log_every")
+
+
+@dataclass(frozen=True)
+class TrainSchedule(Config):
+    """Optimisation schedule, budgets and processes of a training run (base of every training config).
+
+    Fields:
+        epochs: epochs to train. batch_size: items (images) per step and process.
+        lr: Adam learning rate. weight_decay: Adam weight decay.
+        warmup_steps: exponential warm-up from lr/1000 to lr over the first global steps (0: none).
+        lr_step_epochs, lr_gamma: learning rate x ``lr_gamma`` every ``lr_step_epochs`` epochs (a
+            per-epoch StepLR; see :func:`learning_rate`).
+        grad_clip: max gradient norm (0: off). amp: mixed precision (autocast + grad scaler, CUDA only).
+        time_budget: seconds of training (0: none), summed over resumes and checked after every step:
+            once spent, the rest of the epoch is skipped, the epoch is checkpointed as done and
+            training stops with the final model.
+        max_steps_per_epoch: cap on the steps of an epoch (0: full epochs).
+        seed: initialisation, shuffling, sampling and augmentation.
+        num_workers: data-loading worker processes. num_threads: torch CPU threads (0: torch default).
+        log_every: steps between rows of ``metrics.csv``.
+    """
+
+    epochs: int = 100
+    batch_size: int = 8
+    lr: float = 1e-3
+    warmup_steps: int = 0
+    lr_step_epochs: int = 10
+    lr_gamma: float = 0.6
+    weight_decay: float = 0.0
+    grad_clip: float = 0.0
+    amp: bool = True
+    time_budget: float = 0.0
+    max_steps_per_epoch: int = 0
+    seed: int = 0
+    num_workers: int = 2
+    num_threads: int = 0
+    log_every: int = 10
+
+    def validate(self) -> None:
+        """Check the schedule fields (ValueError naming the field); subclasses call it first."""
+        for name in ("epochs", "batch_size", "lr_step_epochs", "log_every"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if not self.lr > 0:
+            raise ValueError(f"lr must be > 0, got {self.lr}")
+        if not 0 < self.lr_gamma <= 1:
+            raise ValueError(f"lr_gamma must be in (0, 1], got {self.lr_gamma}")
+        for name in ("warmup_steps", "weight_decay", "grad_clip", "max_steps_per_epoch", "num_workers", "num_threads"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.time_budget < 0:
+            raise ValueError(f"time_budget must be >= 0 (0: none), got {self.time_budget}")
+
+
+def learning_rate(cfg: TrainSchedule, epoch: int, step: int) -> float:
+    """Learning rate of global ``step`` (0-based) in ``epoch`` (0-based).
+
+    ``lr * lr_gamma ** (epoch // lr_step_epochs) * w(step)`` with the exponential warm-up
+    ``w(s) = 1000 ** (s / warmup_steps - 1)`` for ``s < warmup_steps`` (then 1).
+    """
+    lr = cfg.lr * cfg.lr_gamma ** (epoch // cfg.lr_step_epochs)
+    if cfg.warmup_steps and step < cfg.warmup_steps:
+        lr *= 1000.0 ** (step / cfg.warmup_steps - 1.0)
+    return lr
