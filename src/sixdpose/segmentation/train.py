@@ -25,7 +25,7 @@ import json
 import logging
 from pathlib import Path
 
-from ..datasets.base import open_dataset
+from ..datasets.readers import open_dataset
 from ..fileio import atomic_write_json
 from ..training import TrainingError, TrainTask, data_fingerprint, read_metrics
 from ..training import ensure_trained as _ensure_trained
