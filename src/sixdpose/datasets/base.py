@@ -182,14 +182,14 @@ def _read_checked(path: str | Path, modes: tuple[str, ...], expected: str) -> np
         raise DatasetError(f"{path}: unreadable image ({e})") from None
 
 
-def read_rgb(path: str | Path) -> np.ndarray:
-    """Read an 8-bit colour image: (H, W, 3) uint8. RGBA drops alpha; 8-bit grey (``L``) is repeated
-    to 3 channels.
+def read_rgb(path: str | Path, grey: bool = True) -> np.ndarray:
+    """Read an 8-bit colour image: (H, W, 3) uint8. RGBA drops alpha; 8-bit grey (``L``, accepted when
+    ``grey``) is repeated to 3 channels.
 
     Raises:
-        DatasetError: missing, unreadable, or not 8-bit RGB/RGBA/grey (e.g. a 16-bit or palette image).
+        DatasetError: missing, unreadable, or not 8-bit RGB/RGBA(/grey) (e.g. a 16-bit or palette image).
     """
-    a = _read_checked(path, ("RGB", "RGBA", "L"), "an 8-bit RGB image")
+    a = _read_checked(path, ("RGB", "RGBA", "L") if grey else ("RGB", "RGBA"), "an 8-bit RGB image")
     if a.ndim == 2:
         a = np.repeat(a[..., None], 3, axis=2)
     return np.ascontiguousarray(a[..., :3])
