@@ -192,16 +192,18 @@ SYN_MANIFEST = TypeAdapter(dict[str, Any])
 
 # -- predicted masks ------------------------------------------------------------------------------
 class PredictionMeta(_Model):
-    """``meta.json`` of a prediction directory (``sixdpose segment``). ``dataset_fingerprint`` is absent
-    in directories written before it was recorded."""
+    """``meta.json`` of a prediction directory (``sixdpose segment``); each field is checked when present
+    (a consumer that needs one asks for it). ``dataset_fingerprint`` is absent in directories written
+    before it was recorded."""
 
-    checkpoint: str
-    classes: list[Any]
-    score_thresh: Annotated[float, Field(strict=True, ge=0, le=1, allow_inf_nan=False)]
-    data: str
+    checkpoint: str | None = None
+    epoch: Int | None = None
+    classes: list[Any] | None = None
+    score_thresh: Annotated[float, Field(strict=True, ge=0, le=1, allow_inf_nan=False)] | None = None
+    data: str | None = None
     split: str | None = None
     subset: str | None = None
-    images: list[Annotated[list[Int], Field(min_length=2, max_length=4)]]
+    images: list[Annotated[list[Int], Field(min_length=2, max_length=4)]] | None = None
     dataset_fingerprint: Annotated[str, StringConstraints(pattern=r"^[0-9a-f]{64}$")] | None = None
 
 

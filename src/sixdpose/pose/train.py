@@ -162,6 +162,10 @@ def _train(kind, data, run_dir, profile, resume, masks, val, dev, progress, over
     reader = as_reader(data, split="train")
     if masks != "gt" and not Path(masks).is_dir():
         raise PoseError(f"{masks}: prediction directory not found (use --masks gt for ground-truth masks)")
+    if masks != "gt":
+        from ..artifacts.predictions import check_predictions_dataset
+
+        check_predictions_dataset(masks, reader)  # masks of another dataset are refused
     pose_ckpt = posenet = None
     if not is_pose:
         pose_ckpt = ck.load(pose_run, kind="pose")
