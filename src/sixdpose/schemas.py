@@ -199,7 +199,7 @@ class PredictionMeta(_Model):
     checkpoint: str | None = None
     epoch: Int | None = None
     classes: list[Any] | None = None
-    score_thresh: Annotated[float, Field(strict=True, ge=0, le=1, allow_inf_nan=False)] | None = None
+    score_thresh: Annotated[float, Field(strict=True, ge=0, allow_inf_nan=False)] | None = None  # > 1: keep none
     data: str | None = None
     split: str | None = None
     subset: str | None = None
