@@ -317,6 +317,27 @@ def test_evaluate_cli_reports_rejected_and_duplicate_rows(syn, tmp_path, capsys)
     assert summary["n_correct"] == summary["n_gt"] - 1
 
 
+def test_rejected_rows_do_not_take_their_image_out_of_the_evaluation(syn, tmp_path, capsys):
+    """By default only images with rows are evaluated: an image whose every row is rejected is still one."""
+    ds = open_dataset(syn)
+    rows = gt_rows(ds)
+    first = (rows[0].scene_id, rows[0].im_id)
+    for r in rows:
+        if (r.scene_id, r.im_id) == first:
+            r.R = r.R @ np.diag([1.0, 1.0, -1.0])
+    n_bad = sum((r.scene_id, r.im_id) == first for r in rows)
+    res = evaluate(ds, rows, min_px=0)
+    assert res.n_rejected == n_bad and res.n_gt == len(rows) and res.n_correct == len(rows) - n_bad
+    assert res.n_images == len(ds)  # the image's time is still counted once
+    csv = tmp_path / "r.csv"
+    write_results(rows, csv)
+    capsys.readouterr()
+    assert main(["evaluate", "--data", str(syn), "--results", str(csv), "--no-progress", "--min-px", "0"]) == 0
+    assert f"{n_bad} rejected row(s)" in capsys.readouterr().out
+    summary = _strict_json(tmp_path / "r_eval" / "summary.json")
+    assert summary["n_gt"] == len(rows) and summary["n_correct"] == len(rows) - n_bad
+
+
 # -- every file of a BOP set mutated ---------------------------------------------------------------
 def _remove_key(d, key):
     """Delete ``key`` from the first image's first entry (or the first object's entry)."""

@@ -215,13 +215,19 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
 
     dataset = as_reader(dataset)
     names = dataset.object_ids
+    estimates = list(estimates)
+    # images with rows, rejected ones included: a rejected row leaves its GT instances counted, not skipped
+    row_time: dict[tuple[int, int], float] = {}
+    for e in estimates:
+        k = (int(e.scene_id), int(e.im_id))
+        row_time[k] = max(row_time.get(k, 0.0), float(e.time))
     estimates, rejected, n_dup = check_estimates(estimates, names)
     by_img: dict[tuple[int, int], list[PoseEstimate]] = defaultdict(list)
     for e in estimates:
         by_img[(e.scene_id, e.im_id)].append(e)
     keys = dataset.keys()
     known = set(keys)
-    unknown = [k for k in by_img if k not in known]
+    unknown = [k for k in row_time if k not in known]
     if unknown:
         raise EvaluationError(f"results refer to image(s) not in {dataset.location}, e.g. scene {unknown[0][0]} image {unknown[0][1]}")
     n_gt_obj: dict[int, int] = defaultdict(int)
@@ -235,7 +241,7 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
             raise EvaluationError(f"images not in {dataset.location}, e.g. scene {missing[0][0]} image {missing[0][1]}")
         eval_keys = [k for k in keys if k in want]
     else:
-        eval_keys = [k for k in keys if k in by_img] if by_img else keys
+        eval_keys = [k for k in keys if k in row_time] if row_time else keys
     bop_err: dict[int, list] = defaultdict(list)
     syms: dict[int, list] = {}
     rel_err: list[np.ndarray] = []  # per image and object: (estimates, GT) errors / diameter
@@ -282,7 +288,7 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
     curve = {"threshold_pct": list(CURVE_THRESHOLDS_PCT),
              "accuracy": [100.0 * sum(sum(m is not None for m in greedy_match(e, pct / 100.0)) for e in rel_err) / n_gt
                           if n_gt else float("nan") for pct in CURVE_THRESHOLDS_PCT]}
-    img_time = {k: max(e.time for e in v) for k, v in by_img.items()}
+    img_time = row_time  # each image once (its rows repeat the image's time)
     total = float(sum(img_time.values()))
     n_est = sum(len(v) for v in by_img.values())
     return EvalResult(
