@@ -634,6 +634,23 @@ def test_mutated_segment_output_gives_one_line(syn, seg_out, tmp_path, capsys, f
         assert not (tmp_path / "r.csv").exists()
 
 
+@pytest.mark.parametrize("bad", ["score 1.5", "score negative", "labels float"])
+def test_prediction_file_out_of_range_is_refused(tmp_path, bad):
+    from sixdpose.artifacts.predictions import read_predictions
+
+    masks = np.zeros((1, 4, 5), bool)
+    labels, scores = np.array([15], np.int32), np.array([0.9], np.float32)
+    if bad == "score 1.5":
+        scores[0] = 1.5
+    elif bad == "score negative":
+        scores[0] = -0.1
+    else:
+        labels = np.array([15.5])
+    np.savez(tmp_path / "0_1.npz", masks=masks, labels=labels, scores=scores)
+    with pytest.raises(PredictionError, match=r"0_1.npz: (scores|labels)"):
+        read_predictions(tmp_path, 0, 1)
+
+
 # -- predictions of another dataset -------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def other(tmp_path_factory) -> Path:

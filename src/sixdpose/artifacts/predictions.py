@@ -83,7 +83,8 @@ def read_predictions(pred_dir: str | Path, scene_id: int, im_id: int) -> list[De
     Returns:
         a list of :class:`Detection`; empty if the image has no file (no detections).
     Raises:
-        PredictionError: the file is unreadable, or its arrays are missing or inconsistent.
+        PredictionError: the file is unreadable, or its arrays are missing, inconsistent, or out of
+            range (scores outside [0, 1], labels that are not integers).
     """
     path = prediction_path(pred_dir, scene_id, im_id)
     if not path.is_file():
@@ -102,6 +103,11 @@ def read_predictions(pred_dir: str | Path, scene_id: int, im_id: int) -> list[De
                               f"{masks.shape}, {labels.shape}, {scores.shape}")
     if not np.isfinite(scores).all():
         raise PredictionError(f"{path}: non-finite scores")
+    if n and not (scores.min() >= 0 and scores.max() <= 1):
+        raise PredictionError(f"{path}: scores: expected confidences in [0, 1], got {scores.min():g} to "
+                              f"{scores.max():g}")
+    if not (np.issubdtype(labels.dtype, np.integer) or n == 0):
+        raise PredictionError(f"{path}: labels: expected integer obj_ids, got dtype {labels.dtype}")
     order = np.argsort(-scores, kind="stable")
     return [Detection(int(labels[i]), float(scores[i]), masks[i].astype(bool, copy=False),
                       None if boxes is None else boxes[i]) for i in order]
@@ -199,4 +205,5 @@ def check_predictions_dataset(pred_dir: str | Path, reader) -> None:
     if meta["dataset_fingerprint"] != fp:
         split = f" (split {meta['split']})" if meta.get("split") else ""
         raise PredictionError(f"{pred_dir}: masks predicted on another dataset: {made_on}{split}, not "
-                              f"{reader.location} (dataset fingerprints differ); run `sixdpose segment` on this dataset")
+                              f"{reader.location} (dataset fingerprints differ); run `sixdpose segment` on this "
+                              "dataset")
