@@ -250,7 +250,15 @@ def test_duplicate_rows_are_counted_once(syn, caplog):
     assert twice.n_duplicates == len(gt_rows(ds))
     assert twice.accuracy == once.accuracy and twice.n_estimates == once.n_estimates
     assert twice.instances_per_s == pytest.approx(once.instances_per_s) and twice.fps == pytest.approx(once.fps)
-    assert "counted once" in caplog.text
+    assert "counted once" in caplog.text and "repeat" in caplog.text
+
+
+def test_a_pose_repeated_with_another_score_is_counted_once(syn):
+    ds = open_dataset(syn)
+    rows = gt_rows(ds)
+    again = [PoseEstimate(r.scene_id, r.im_id, r.obj_id, 0.5, r.R, r.t, r.time) for r in rows]
+    res = _evaluate_rows(ds, rows + again)
+    assert res.n_duplicates == len(rows) and res.n_estimates == len(rows) and res.accuracy == 100.0
 
 
 def test_timing_counts_each_image_once(syn):

@@ -17,8 +17,8 @@ Protocol (paper section V-A; matching as in the BOP toolkit):
 * Rows checked before scoring (:func:`check_estimates`): a row whose ``R`` is not a rotation
   (``max |R^T R - I| > ROTATION_TOL`` or ``det R <= 0``), with a non-finite value, or with an
   ``obj_id`` the dataset does not have is *rejected*: never credited, counted in ``n_rejected`` and
-  named in one warning line. A row repeated exactly (same image, object, score, R and t) is counted
-  once (``n_duplicates``, one warning line).
+  named in one warning line. A row that repeats an earlier row's pose (same image, object, R and t,
+  whatever its score) is counted once, the first one kept (``n_duplicates``, one warning line).
 """
 
 from __future__ import annotations
@@ -152,7 +152,7 @@ def check_estimates(estimates, object_ids) -> tuple[list[PoseEstimate], list[tup
     Args:
         estimates: :class:`~sixdpose.artifacts.poses.PoseEstimate` rows. object_ids: the dataset's obj_ids.
     Returns:
-        ``(kept, rejected, n_duplicates)``: the rows to score (exact repeats dropped), ``(scene_id,
+        ``(kept, rejected, n_duplicates)``: the rows to score (repeated poses dropped), ``(scene_id,
         im_id, obj_id, reason)`` of each rejected row, and the number of repeats dropped.
     Raises:
         EvaluationError: a row's time is negative or not finite.
@@ -175,7 +175,7 @@ def check_estimates(estimates, object_ids) -> tuple[list[PoseEstimate], list[tup
         if reason:
             rejected.append((int(e.scene_id), int(e.im_id), int(e.obj_id), reason))
             continue
-        key = (int(e.scene_id), int(e.im_id), int(e.obj_id), float(e.score), R.tobytes(), t.tobytes())
+        key = (int(e.scene_id), int(e.im_id), int(e.obj_id), R.tobytes(), t.tobytes())
         if key in seen:
             n_dup += 1
             continue
@@ -186,7 +186,7 @@ def check_estimates(estimates, object_ids) -> tuple[list[PoseEstimate], list[tup
         log.warning("%d results row(s) rejected and not credited (first: scene %d image %d obj %d: %s)",
                     len(rejected), s, i, o, why)
     if n_dup:
-        log.warning("%d results row(s) repeat an earlier row exactly; each is counted once", n_dup)
+        log.warning("%d results row(s) repeat the pose of an earlier row; each pose is counted once", n_dup)
     return kept, rejected, n_dup
 
 
