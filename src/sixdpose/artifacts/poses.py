@@ -131,7 +131,7 @@ def _parse_row(row: dict, where: str) -> PoseEstimate:
     def integer(col: str) -> int:
         text = row.get(col)
         try:
-            v = int(text)
+            v = int(str(text))
         except (TypeError, ValueError):
             raise ResultsError(f"{where}: {col}: expected an integer >= 0, got {text!r}") from None
         if v < 0:
@@ -141,7 +141,7 @@ def _parse_row(row: dict, where: str) -> PoseEstimate:
     def number(col: str) -> float:
         text = row.get(col)
         try:
-            return float(text)
+            return float(str(text))
         except (TypeError, ValueError):
             raise ResultsError(f"{where}: {col}: expected a number, got {text!r}") from None
 
