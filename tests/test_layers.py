@@ -29,7 +29,7 @@ PKG = SRC / "sixdpose"
 #: stage's ``<stage>.cli``) belongs to the top layer.
 LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("base", ("sixdpose", "sixdpose.errors", "sixdpose.constants", "sixdpose.fileio", "sixdpose.config",
-              "sixdpose.logs", "sixdpose.runs", "sixdpose.geometry", "sixdpose.registry")),
+              "sixdpose.logs", "sixdpose.runs", "sixdpose.geometry", "sixdpose.registry", "sixdpose.schemas")),
     ("readers", ("sixdpose.datasets", "sixdpose.assets", "sixdpose.artifacts")),
     ("scoring", ("sixdpose.evaluation",)),
     ("stages", ("sixdpose.generation", "sixdpose.segmentation", "sixdpose.registration", "sixdpose.pose",

@@ -86,8 +86,13 @@ def write_results(estimates, path: str | Path) -> Path:
 def read_results(path: str | Path) -> list[PoseEstimate]:
     """Read a BOP results CSV (t in mm) into :class:`PoseEstimate` rows (t in metres).
 
+    Each row is checked: integer ``scene_id``, ``im_id``, ``obj_id`` (>= 0), a finite ``score``, 9
+    finite numbers in ``R``, 3 in ``t``, and a finite ``time`` >= 0 (seconds). Whether ``R`` is a rotation
+    is checked by ``sixdpose evaluate`` (such rows are rejected there, not credited).
+
     Raises:
-        ResultsError: missing file, missing column, or a malformed row (the message names the line).
+        ResultsError: missing file, missing column, or a malformed row (the message names the line and
+            the column).
     """
     path = Path(path)
     if not path.is_file():
@@ -99,14 +104,48 @@ def read_results(path: str | Path) -> list[PoseEstimate]:
         if missing:
             raise ResultsError(f"{path}: missing column(s) {', '.join(sorted(missing))}")
         for line, row in enumerate(reader, start=2):
-            try:
-                R = np.array([float(v) for v in row["R"].split()], dtype=np.float64).reshape(3, 3)
-                t = np.array([float(v) for v in row["t"].split()], dtype=np.float64).reshape(3) / 1000.0
-                est = PoseEstimate(int(row["scene_id"]), int(row["im_id"]), int(row["obj_id"]), float(row["score"]), R, t,
-                                   float(row["time"]))
-            except (ValueError, TypeError, AttributeError) as e:
-                raise ResultsError(f"{path}: line {line}: malformed row ({e})") from None
-            if not (np.isfinite(R).all() and np.isfinite(t).all() and np.isfinite(est.score)):
+            est = _parse_row(row, f"{path}: line {line}")
+            if not (np.isfinite(est.R).all() and np.isfinite(est.t).all() and np.isfinite(est.score)):
                 raise ResultsError(f"{path}: line {line}: non-finite value in score, R or t")
+            if not (np.isfinite(est.time) and est.time >= 0):
+                raise ResultsError(f"{path}: line {line}: time: expected seconds >= 0, got {row['time']!r}")
             out.append(est)
     return out
+
+
+def _parse_row(row: dict, where: str) -> PoseEstimate:
+    """One CSV row (strings) as a :class:`PoseEstimate` (t in metres); :class:`ResultsError` naming
+    ``where`` and the column otherwise."""
+
+    def number_list(col: str, n: int) -> np.ndarray:
+        text = row.get(col)
+        try:
+            vals = [float(v) for v in (text or "").split()]
+        except ValueError:
+            raise ResultsError(f"{where}: {col}: expected {n} numbers separated by spaces, got {text!r}") from None
+        if len(vals) != n:
+            raise ResultsError(f"{where}: {col}: expected {n} numbers separated by spaces, got {len(vals)}")
+        return np.array(vals, dtype=np.float64)
+
+    def integer(col: str) -> int:
+        text = row.get(col)
+        try:
+            v = int(str(text))
+        except (TypeError, ValueError):
+            raise ResultsError(f"{where}: {col}: expected an integer >= 0, got {text!r}") from None
+        if v < 0:
+            raise ResultsError(f"{where}: {col}: expected an integer >= 0, got {v}")
+        return v
+
+    def number(col: str) -> float:
+        text = row.get(col)
+        try:
+            return float(str(text))
+        except (TypeError, ValueError):
+            raise ResultsError(f"{where}: {col}: expected a number, got {text!r}") from None
+
+    ids = [integer(c) for c in ("scene_id", "im_id", "obj_id")]
+    score = number("score")
+    R = number_list("R", 9).reshape(3, 3)
+    t = number_list("t", 3) / 1000.0
+    return PoseEstimate(ids[0], ids[1], ids[2], score, R, t, number("time"))

@@ -24,14 +24,18 @@ N may be 0. An image without a file had no detections (or was not segmented).
 from __future__ import annotations
 
 import json
+import logging
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from .. import schemas
 from ..errors import SixdposeError
 from ..fileio import atomic_path, atomic_write_json
+
+log = logging.getLogger(__name__)
 
 _NAME = re.compile(r"^(\d+)_(\d+)\.npz$")
 
@@ -79,7 +83,8 @@ def read_predictions(pred_dir: str | Path, scene_id: int, im_id: int) -> list[De
     Returns:
         a list of :class:`Detection`; empty if the image has no file (no detections).
     Raises:
-        PredictionError: the file is unreadable, or its arrays are missing or inconsistent.
+        PredictionError: the file is unreadable, or its arrays are missing, inconsistent, or out of
+            range (scores outside [0, 1], labels that are not integers).
     """
     path = prediction_path(pred_dir, scene_id, im_id)
     if not path.is_file():
@@ -98,6 +103,11 @@ def read_predictions(pred_dir: str | Path, scene_id: int, im_id: int) -> list[De
                               f"{masks.shape}, {labels.shape}, {scores.shape}")
     if not np.isfinite(scores).all():
         raise PredictionError(f"{path}: non-finite scores")
+    if n and not (scores.min() >= 0 and scores.max() <= 1):
+        raise PredictionError(f"{path}: scores: expected confidences in [0, 1], got {scores.min():g} to "
+                              f"{scores.max():g}")
+    if not (np.issubdtype(labels.dtype, np.integer) or n == 0):
+        raise PredictionError(f"{path}: labels: expected integer obj_ids, got dtype {labels.dtype}")
     order = np.argsort(-scores, kind="stable")
     return [Detection(int(labels[i]), float(scores[i]), masks[i].astype(bool, copy=False),
                       None if boxes is None else boxes[i]) for i in order]
@@ -118,12 +128,82 @@ def write_predictions_meta(pred_dir: str | Path, meta: dict) -> Path:
     return atomic_write_json(Path(pred_dir) / "meta.json", meta)
 
 
-def read_predictions_meta(pred_dir: str | Path) -> dict:
-    """Read ``pred_dir/meta.json`` (``{}`` if absent). Raises :class:`PredictionError` if corrupt."""
+def read_predictions_meta(pred_dir: str | Path, required: tuple[str, ...] = ()) -> dict:
+    """Read ``pred_dir/meta.json`` (``{}`` if absent), checked against
+    :class:`sixdpose.schemas.PredictionMeta`.
+
+    Args:
+        pred_dir: the prediction directory. required: fields that must be present (e.g. ``("classes",
+            "images")``); with any, a missing ``meta.json`` is an error too.
+    Raises:
+        PredictionError: corrupt or truncated JSON, a field of the wrong type or range, or a required
+            field missing (one line naming the file and the field).
+    """
     p = Path(pred_dir) / "meta.json"
     if not p.is_file():
+        if required:
+            raise PredictionError(f"{p}: not a prediction directory of `sixdpose segment` (no meta.json)")
         return {}
     try:
-        return json.loads(p.read_text())
-    except ValueError as e:
+        meta = json.loads(p.read_text())
+    except (ValueError, OSError) as e:
         raise PredictionError(f"{p}: corrupt JSON ({e})") from None
+    if not isinstance(meta, dict):
+        raise PredictionError(f"{p}: expected a JSON object, got {type(meta).__name__}")
+    checked = schemas.check(schemas.PredictionMeta, meta, p, PredictionError)
+    for k in required:
+        if getattr(checked, k, None) is None:
+            raise PredictionError(f"{p}: missing field {k!r}")
+    return meta
+
+
+def read_coco_results(pred_dir: str | Path) -> list[dict] | None:
+    """Read ``pred_dir/coco_results.json`` (None if absent), checked against
+    :data:`sixdpose.schemas.COCO_RESULTS` (image_id, category_id, RLE segmentation, bbox, score in [0, 1]).
+
+    Raises:
+        PredictionError: corrupt or truncated JSON, or an entry that does not fit (names the entry and field).
+    """
+    p = Path(pred_dir) / "coco_results.json"
+    if not p.is_file():
+        return None
+    try:
+        data = json.loads(p.read_text())
+    except (ValueError, OSError) as e:
+        raise PredictionError(f"{p}: corrupt JSON ({e})") from None
+    schemas.check(schemas.COCO_RESULTS, data, p, PredictionError, item="entry")
+    return data
+
+
+def check_predictions_dataset(pred_dir: str | Path, reader) -> None:
+    """Refuse predicted masks made on another dataset (or split) than ``reader``'s.
+
+    ``sixdpose segment`` records the fingerprint of the dataset split it segmented
+    (:func:`sixdpose.datasets.readers.dataset_fingerprint`) in ``meta.json``; a consumer (register,
+    predict-pose, train-pose, eval-seg) calls this before using the masks. A directory without
+    ``meta.json``, or with one written before fingerprints were recorded, is accepted with a warning;
+    a reader that has no fingerprint (not a BOP or synthetic reader) is not checked.
+
+    Raises:
+        PredictionError: the fingerprints differ (the message names both datasets), or ``meta.json`` is
+            corrupt.
+    """
+    from ..datasets.readers import dataset_fingerprint
+
+    fp = dataset_fingerprint(reader)
+    if fp is None:
+        return
+    meta = read_predictions_meta(pred_dir)
+    made_on = meta.get("data", "an unknown dataset")
+    if not meta:
+        log.warning("%s: no meta.json; cannot check that these masks were predicted on %s", pred_dir, reader.location)
+        return
+    if meta.get("dataset_fingerprint") is None:
+        log.warning("%s/meta.json has no dataset fingerprint (written by an older sixdpose); cannot check that these "
+                    "masks were predicted on %s (meta.json says %s)", pred_dir, reader.location, made_on)
+        return
+    if meta["dataset_fingerprint"] != fp:
+        split = f" (split {meta['split']})" if meta.get("split") else ""
+        raise PredictionError(f"{pred_dir}: masks predicted on another dataset: {made_on}{split}, not "
+                              f"{reader.location} (dataset fingerprints differ); run `sixdpose segment` on this "
+                              "dataset")

@@ -163,6 +163,61 @@ def read_image(path: str | Path) -> np.ndarray:
         raise DatasetError(f"{path}: unreadable image ({e})") from None
 
 
+def _read_checked(path: str | Path, modes: tuple[str, ...], expected: str) -> np.ndarray:
+    """Read an image whose PIL mode must be one of ``modes``; else a :class:`DatasetError` naming the
+    file, its mode and ``expected``."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            if im.mode not in modes:
+                raise DatasetError(f"{path}: expected {expected}, got an image of mode {im.mode} "
+                                   f"({len(im.getbands())} channel(s))")
+            return np.asarray(im).copy()
+    except DatasetError:
+        raise
+    except FileNotFoundError:
+        raise DatasetError(f"{path}: file not found") from None
+    except Exception as e:  # PIL raises several types for truncated / non-image files
+        raise DatasetError(f"{path}: unreadable image ({e})") from None
+
+
+def read_rgb(path: str | Path, grey: bool = True) -> np.ndarray:
+    """Read an 8-bit colour image: (H, W, 3) uint8. RGBA drops alpha; 8-bit grey (``L``, accepted when
+    ``grey``) is repeated to 3 channels.
+
+    Raises:
+        DatasetError: missing, unreadable, or not 8-bit RGB/RGBA(/grey) (e.g. a 16-bit or palette image).
+    """
+    a = _read_checked(path, ("RGB", "RGBA", "L") if grey else ("RGB", "RGBA"), "an 8-bit RGB image")
+    if a.ndim == 2:
+        a = np.repeat(a[..., None], 3, axis=2)
+    return np.ascontiguousarray(a[..., :3])
+
+
+def read_depth_png16(path: str | Path) -> np.ndarray:
+    """Read a 16-bit single-channel depth PNG (BOP): (H, W) uint16 raw units.
+
+    Raises:
+        DatasetError: missing, unreadable, or not 16-bit single-channel (an 8-bit or colour image
+            would be read at the wrong scale, so it is refused).
+    """
+    a = _read_checked(path, ("I;16", "I;16B", "I;16L"), "a 16-bit single-channel depth image")
+    if a.ndim != 2:
+        raise DatasetError(f"{path}: expected a 16-bit single-channel depth image, got shape {a.shape}")
+    return a.astype(np.uint16, copy=False)
+
+
+def read_mask(path: str | Path) -> np.ndarray:
+    """Read a binary mask image (8-bit grey or 1-bit; value > 0 is inside): (H, W) bool.
+
+    Raises:
+        DatasetError: missing, unreadable, or not an 8-bit/1-bit single-channel image.
+    """
+    a = _read_checked(path, ("L", "1"), "an 8-bit single-channel mask")
+    return a > 0
+
+
 def check_depth_scale(reader: "DatasetReader", n_images: int = 3, low: float = 0.5, high: float = 2.0) -> float | None:
     """Guard against a wrong depth unit: compare the median masked depth of annotated instances with
     their ground-truth distance ``t_z`` on the first ``n_images`` images that have both.

@@ -31,7 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .base import DatasetError, Instance, ObjectModel, Sample, read_image
+from .. import schemas
+from .base import DatasetError, Instance, ObjectModel, Sample, read_depth_png16, read_mask, read_rgb
 from .ply import read_ply, vertex_normals
 
 log = logging.getLogger(__name__)
@@ -85,20 +86,18 @@ def load_bop_camera(path: str | Path) -> BopCamera:
         raise DatasetError(f"{path}: expected a JSON object")
 
     def k_of(entry, where):
-        try:
-            K = np.asarray(entry["cam_K"], dtype=np.float64).reshape(3, 3)
-        except (ValueError, TypeError):
-            raise DatasetError(f"{path}: {where}cam_K is not 9 numbers") from None
-        return float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
+        if not isinstance(entry.get("cam_K"), list) or len(entry["cam_K"]) != 9:
+            raise DatasetError(f"{path}: {where}cam_K is not 9 numbers")
+        K = schemas.check(schemas.BopCameraEntry, {"cam_K": entry["cam_K"]}, path, DatasetError, where).cam_K
+        return float(K[0]), float(K[4]), float(K[2]), float(K[5])
 
     size = (None, None)
     if "cam_K" in d:
+        schemas.check(schemas.BopCameraFile, d, path, DatasetError)
         fx, fy, cx, cy = k_of(d, "")
     elif all(k in d for k in ("fx", "fy", "cx", "cy")):
-        try:
-            fx, fy, cx, cy = (float(d[k]) for k in ("fx", "fy", "cx", "cy"))
-        except (TypeError, ValueError):
-            raise DatasetError(f"{path}: fx, fy, cx, cy must be numbers") from None
+        c = schemas.check(schemas.BopCameraFile, d, path, DatasetError)
+        fx, fy, cx, cy = c.fx, c.fy, c.cx, c.cy
     else:
         entries = {}
         for key, v in d.items():
@@ -159,19 +158,16 @@ class BopDataset:
         targets=None,
     ):
         self.root = Path(root)
+        schemas.safe_name(split, "split", DatasetError)
+        schemas.safe_name(models_dir, "models_dir", DatasetError)
         self.split = split
         self.models_path = self.root / models_dir
         info_path = self.models_path / "models_info.json"
         info = load_json(info_path)
         if not isinstance(info, dict):
             raise DatasetError(f"{info_path}: expected a mapping obj_id -> info")
-        try:
-            self.models_info: dict[int, dict] = {int(k): v for k, v in info.items()}
-        except ValueError as e:
-            raise DatasetError(f"{info_path}: keys must be integer object ids ({e})") from None
-        for oid, v in self.models_info.items():
-            if not isinstance(v, dict) or "diameter" not in v:
-                raise DatasetError(f"{info_path}: object {oid}: missing field 'diameter'")
+        schemas.check(schemas.BOP_MODELS_INFO, info, info_path, DatasetError, item="object")
+        self.models_info: dict[int, dict] = {int(k): v for k, v in info.items()}
         self.symmetric_ids = None if symmetric_ids is None else {int(i) for i in symmetric_ids}
         split_dir = self.root / split
         if not split_dir.is_dir():
@@ -193,9 +189,14 @@ class BopDataset:
         self._gt_info: dict[int, dict[int, list] | None] = {}
         self._keys: list[tuple[int, int]] = []
         for sid, d in self._scene_dirs.items():
-            gt = load_json(d / "scene_gt.json")
-            cam = load_json(d / "scene_camera.json")
-            gi = load_json(d / "scene_gt_info.json") if (d / "scene_gt_info.json").is_file() else None
+            gt = schemas.check(schemas.BOP_SCENE_GT, load_json(d / "scene_gt.json"), d / "scene_gt.json", DatasetError,
+                               item="image")
+            cam = schemas.check(schemas.BOP_SCENE_CAMERA, load_json(d / "scene_camera.json"), d / "scene_camera.json",
+                                DatasetError, item="image")
+            gi = None
+            if (d / "scene_gt_info.json").is_file():
+                gi = schemas.check(schemas.BOP_SCENE_GT_INFO, load_json(d / "scene_gt_info.json"),
+                                   d / "scene_gt_info.json", DatasetError, item="image")
             self._gt[sid] = {int(k): v for k, v in gt.items()}
             self._cam[sid] = {int(k): v for k, v in cam.items()}
             self._gt_info[sid] = None if gi is None else {int(k): v for k, v in gi.items()}
@@ -213,6 +214,7 @@ class BopDataset:
         if not self.has_masks:
             log.info("%s: split %r has no mask_visib; Instance.mask will be None", self.root, split)
         self._models: dict[int, ObjectModel] = {}
+        self._checked: dict[tuple[int, int], tuple] = {}
 
     # -- torch Dataset protocol -------------------------------------------------------------
     def __len__(self) -> int:
@@ -249,51 +251,61 @@ class BopDataset:
             raise DatasetError(f"{d / 'scene_gt.json'}: no image {im_id}")
         rgb_im = None
         if rgb:
-            rgb_im = read_image(self._rgb_path(scene_id, im_id))
-            if rgb_im.ndim == 2:
-                rgb_im = np.repeat(rgb_im[..., None], 3, axis=2)
-            rgb_im = rgb_im[..., :3].astype(np.uint8, copy=False)
-        cam = self._cam[scene_id][im_id]
-        try:
-            K = np.asarray(cam["cam_K"], dtype=np.float64).reshape(3, 3)
-        except (KeyError, ValueError, TypeError) as e:
-            raise DatasetError(f"{d / 'scene_camera.json'}: image {im_id}: bad cam_K ({e})") from None
+            rgb_im = read_rgb(self._rgb_path(scene_id, im_id))
+        cam, gts, infos = self._frame(scene_id, im_id)
+        K = np.asarray(cam.cam_K, dtype=np.float64).reshape(3, 3)
         depth_im = None
         dpath = d / "depth" / f"{im_id:06d}.png"
         if depth and (d / "depth").is_dir():
-            raw = read_image(dpath)
-            if raw.ndim != 2:
-                raise DatasetError(f"{dpath}: expected a single-channel 16-bit depth image")
+            if cam.depth_scale is None:
+                raise DatasetError(f"{d / 'scene_camera.json'}: image {im_id}: missing field 'depth_scale' (the depth "
+                                   "unit in mm, e.g. 0.1 for YCB-Video, 1.0 for LM-O); no default is assumed")
+            raw = read_depth_png16(dpath)
             if rgb_im is not None and raw.shape != rgb_im.shape[:2]:
                 raise DatasetError(f"{dpath}: shape {raw.shape} does not match the RGB image {rgb_im.shape[:2]}")
-            scale = float(cam.get("depth_scale", 1.0))
-            depth_im = (raw.astype(np.float32) * np.float32(scale / 1000.0)).astype(np.float32)
+            depth_im = (raw.astype(np.float32) * np.float32(cam.depth_scale / 1000.0)).astype(np.float32)
         masks = masks and (d / "mask_visib").is_dir()
-        gts = self._gt[scene_id][im_id]
-        infos = (self._gt_info[scene_id] or {}).get(im_id)
         insts = []
         seen: dict[int, int] = {}
         for k, g in enumerate(gts):
-            try:
-                oid = int(g["obj_id"])
-                R = np.asarray(g["cam_R_m2c"], dtype=np.float64).reshape(3, 3)
-                t = np.asarray(g["cam_t_m2c"], dtype=np.float64).reshape(3) / 1000.0
-            except (KeyError, ValueError, TypeError) as e:
-                raise DatasetError(f"{d / 'scene_gt.json'}: image {im_id} gt {k}: bad field ({e})") from None
-            inst = int(g.get("inst", seen.get(oid, 0)))
+            oid = g.obj_id
+            R = np.asarray(g.cam_R_m2c, dtype=np.float64).reshape(3, 3)
+            t = np.asarray(g.cam_t_m2c, dtype=np.float64).reshape(3) / 1000.0
+            inst = g.inst if g.inst is not None else seen.get(oid, 0)
             seen[oid] = seen.get(oid, 0) + 1
             px = -1
-            if infos is not None and k < len(infos) and "px_count_visib" in infos[k]:
-                px = int(infos[k]["px_count_visib"])
+            if infos is not None and k < len(infos) and infos[k].px_count_visib is not None:
+                px = infos[k].px_count_visib
             mask = None
             if masks:
-                m = read_image(d / "mask_visib" / f"{im_id:06d}_{k:06d}.png")
-                mask = (m if m.ndim == 2 else m[..., 0]) > 0
+                mask = read_mask(d / "mask_visib" / f"{im_id:06d}_{k:06d}.png")
                 if px < 0:
                     px = int(mask.sum())
             name = str(self.models_info.get(oid, {}).get("obj_name", f"obj_{oid:06d}"))
             insts.append(Instance(name, oid, inst, R, t, mask, px))
         return Sample(scene_id, im_id, rgb_im, depth_im, K, insts)
+
+    def _frame(self, scene_id: int, im_id: int) -> tuple:
+        """The validated ``scene_camera``, ``scene_gt`` and ``scene_gt_info`` entries of one image (cached).
+
+        Raises:
+            DatasetError: an entry does not fit its schema (:mod:`sixdpose.schemas`): the message names
+                the file, the image and the field.
+        """
+        key = (scene_id, im_id)
+        if key not in self._checked:
+            d = self._scene_dirs[scene_id]
+            where = f"image {im_id}: "
+            cam = schemas.check(schemas.BopCameraEntry, self._cam[scene_id][im_id], d / "scene_camera.json",
+                                DatasetError, where)
+            gts = schemas.check(schemas.BOP_GT_LIST, self._gt[scene_id][im_id], d / "scene_gt.json", DatasetError,
+                                where, item="gt")
+            infos = (self._gt_info[scene_id] or {}).get(im_id)
+            if infos is not None:
+                infos = schemas.check(schemas.BOP_GT_INFO_LIST, infos, d / "scene_gt_info.json", DatasetError,
+                                      where, item="gt")
+            self._checked[key] = (cam, gts, infos)
+        return self._checked[key]
 
     # -- models -----------------------------------------------------------------------------
     @property
@@ -370,8 +382,9 @@ def export_bop(dataset, out: str | Path, split: str = "test", depth_scale: float
         ``symmetries_continuous`` entry whose axis is estimated from the model's principal axes
         (the bop_toolkit uses it only for MSSD/MSPD; ADD-S needs just the flag).
     Raises:
-        DatasetError: ``out`` holds a finished export. OutputError: ``out`` is a non-empty directory
-            that is not an export of ours.
+        DatasetError: ``out`` holds a finished export; ``split`` is not a plain folder name (a path
+            separator, ``..``, absolute); ``depth_scale`` is not a positive finite number. Nothing is
+            written then. OutputError: ``out`` is a non-empty directory that is not an export of ours.
     """
     from tqdm import tqdm
 
@@ -379,6 +392,15 @@ def export_bop(dataset, out: str | Path, split: str = "test", depth_scale: float
     from .layout import png_bytes
     from .ply import write_ply
 
+    schemas.safe_name(split, "--split", DatasetError)
+    try:
+        depth_scale = float(depth_scale)
+    except (TypeError, ValueError):
+        raise DatasetError(f"--depth-scale: expected a positive number of mm per depth unit, got {depth_scale!r}") \
+            from None
+    if not (np.isfinite(depth_scale) and depth_scale > 0):
+        raise DatasetError(f"--depth-scale: expected a positive number of mm per depth unit (0.1 for 0.1 mm), "
+                           f"got {depth_scale:g}")
     out = Path(out)
     if (out / "models" / "models_info.json").exists() and (out / "dataset_info.md").exists():
         raise DatasetError(f"{out}: already holds a finished export; choose a new --out")

@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .. import schemas
 from . import layout
-from .base import DatasetError, Instance, ObjectModel, Sample, read_image
+from .base import DatasetError, Instance, ObjectModel, Sample, read_image, read_mask, read_rgb
 from .ply import read_ply
 
 try:  # fast YAML if libyaml is present
@@ -28,6 +29,19 @@ def load_yaml(path: Path):
             return yaml.load(f, Loader=_Loader)
     except yaml.YAMLError as e:
         raise DatasetError(f"{path}: corrupt YAML ({str(e).splitlines()[0]})") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise DatasetError(f"{path}: unreadable ({e})") from None
+
+
+def load_manifest(path: Path) -> dict:
+    """Read ``manifest.json`` (``{}`` if absent); a corrupt or truncated file is a :class:`DatasetError`."""
+    if not path.is_file():
+        return {}
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise DatasetError(f"{path}: corrupt JSON ({e})") from None
+    return schemas.check(schemas.SYN_MANIFEST, data, path, DatasetError)
 
 
 class SyntheticDataset:
@@ -55,21 +69,19 @@ class SyntheticDataset:
         gt = load_yaml(gt_path) or {}
         if not isinstance(gt, dict):
             raise DatasetError(f"{gt_path}: expected a mapping image number -> annotations")
-        self.gt: dict[int, dict] = {int(k): v for k, v in gt.items()}
+        schemas.check(schemas.SYN_GT, gt, gt_path, DatasetError, item="image")  # each image in full when read
+        self.gt: dict[int, dict] = dict(gt)
         ids = sorted(self.gt) if image_ids is None else [int(i) for i in image_ids]
         missing = [i for i in ids if i not in self.gt]
         if missing:
             raise DatasetError(f"{gt_path}: no entry for image(s) {missing[:5]}")
         self.image_ids = ids
-        try:
-            self._keys: list[tuple[int, int]] = [(int(self.gt[i]["scene_id"]), i) for i in ids]
-        except (KeyError, TypeError, ValueError) as e:
-            raise DatasetError(f"{gt_path}: an image entry has no valid scene_id ({e})") from None
+        self._keys: list[tuple[int, int]] = [(int(self.gt[i]["scene_id"]), i) for i in ids]
         self.load_masks = load_masks
-        manifest = self.root / layout.MANIFEST_FILE
-        self.manifest = json.loads(manifest.read_text()) if manifest.is_file() else {}
+        self.manifest = load_manifest(self.root / layout.MANIFEST_FILE)
         self._models: dict[int, ObjectModel] = {}
         self._info = None
+        self._entries: dict[int, schemas.SynImage] = {}
 
     @property
     def location(self) -> Path:
@@ -99,48 +111,46 @@ class SyntheticDataset:
             raise DatasetError(f"{self.root}: image key must be (scene_id, im_id), got {key!r}") from None
         if im_id not in self.gt or int(self.gt[im_id].get("scene_id", -1)) != scene_id:
             raise DatasetError(f"{self.root / 'gt.yml'}: no image {im_id} in scene {scene_id}")
-        entry = self.gt[im_id]
+        entry = self._entry(im_id)
         rgb_im = None
         if rgb:
-            rgb_im = read_image(self.root / layout.rgb_file(im_id))
-            if rgb_im.ndim != 3:
-                raise DatasetError(f"{self.root / layout.rgb_file(im_id)}: expected an RGB image")
-            rgb_im = rgb_im[..., :3]
+            rgb_im = read_rgb(self.root / layout.rgb_file(im_id), grey=False)
         depth_im = None
         if depth:
             dpath = self.root / layout.depth_file(im_id)
             try:
-                depth_im = np.load(dpath).astype(np.float32, copy=False)
+                raw = np.load(dpath, allow_pickle=False)
             except FileNotFoundError:
                 raise DatasetError(f"{dpath}: file not found") from None
             except Exception as e:
                 raise DatasetError(f"{dpath}: unreadable depth ({e})") from None
+            if not np.issubdtype(raw.dtype, np.floating):
+                raise DatasetError(f"{dpath}: expected float depth in metres, got dtype {raw.dtype} (integer depth would "
+                                   "be read at the wrong scale)")
+            depth_im = raw.astype(np.float32, copy=False)
             if depth_im.ndim != 2 or (rgb_im is not None and depth_im.shape != rgb_im.shape[:2]):
                 raise DatasetError(f"{dpath}: shape {depth_im.shape} does not match the RGB image "
                                    f"{None if rgb_im is None else rgb_im.shape[:2]}")
-        try:
-            K = np.asarray(entry["cam_K"], dtype=np.float64).reshape(3, 3)
-        except (KeyError, ValueError) as e:
-            raise DatasetError(f"{self.root / 'gt.yml'}: image {im_id}: bad cam_K ({e})") from None
+        K = np.asarray(entry.cam_K, dtype=np.float64).reshape(3, 3)
         insts = []
-        for k, o in enumerate(entry.get("objects") or []):
-            try:
-                name = str(o["obj_name"])
-                inst = Instance(
-                    obj_name=name,
-                    obj_id=int(o["obj_id"]),
-                    inst=int(o["inst"]),
-                    R=np.asarray(o["R"], dtype=np.float64).reshape(3, 3),
-                    t=np.asarray(o["t"], dtype=np.float64).reshape(3),
-                    px_visib=int(o.get("px_visib", -1)),
-                )
-            except (KeyError, ValueError, TypeError) as e:
-                raise DatasetError(f"{self.root / 'gt.yml'}: image {im_id} object {k}: bad field ({e})") from None
+        for o in entry.objects or []:
+            inst = Instance(obj_name=o.obj_name, obj_id=o.obj_id, inst=o.inst, R=np.asarray(o.R, dtype=np.float64),
+                            t=np.asarray(o.t, dtype=np.float64), px_visib=o.px_visib)
             if masks:
-                m = read_image(self.root / layout.mask_file(name, im_id, inst.inst))
-                inst.mask = m > 0 if m.ndim == 2 else m[..., 0] > 0
+                inst.mask = read_mask(self.root / layout.mask_file(o.obj_name, im_id, inst.inst))
             insts.append(inst)
         return Sample(scene_id, im_id, rgb_im, depth_im, K, insts)
+
+    def _entry(self, im_id: int) -> schemas.SynImage:
+        """The ``gt.yml`` entry of image ``im_id``, validated (:class:`sixdpose.schemas.SynImage`; cached).
+
+        Raises:
+            DatasetError: naming ``gt.yml``, the image and the field.
+        """
+        if im_id not in self._entries:
+            self._entries[im_id] = schemas.check(schemas.SYN_IMAGE, self.gt[im_id], self.root / layout.GT_FILE,
+                                                 DatasetError, f"image {im_id}: ")
+        return self._entries[im_id]
 
     def merged_mask(self, im_id: int) -> np.ndarray:
         """The paper's merged mask of image ``im_id`` (uint8, value = code - instance)."""
@@ -151,7 +161,10 @@ class SyntheticDataset:
     def models_info(self) -> dict:
         """``models/models_info.yml`` as a dict keyed by object name."""
         if self._info is None:
-            self._info = load_yaml(self.root / layout.MODELS_INFO_FILE) or {}
+            path = self.root / layout.MODELS_INFO_FILE
+            info = load_yaml(path) or {}
+            schemas.check(schemas.SYN_MODELS_INFO, info, path, DatasetError, item="object")
+            self._info = info
         return self._info
 
     @property

@@ -75,6 +75,10 @@ def _run(args) -> int:
         _write_result(args, res, res_path)
     print(f"ADD(-S) accuracy {res.accuracy:.2f}% ({res.n_correct}/{res.n_gt} GT instances; mean over objects "
           f"{res.mean_object_accuracy:.2f}%), {res.fps:.3f} FPS, {res.instances_per_s:.3f} instances/s -> {out}")
+    if res.n_rejected or res.n_duplicates:
+        r0 = res.rejected[0] if res.rejected else None
+        first = f" (first: scene {r0[0]} image {r0[1]} obj {r0[2]}: {r0[3]})" if r0 else ""
+        print(f"not scored: {res.n_rejected} rejected row(s){first}; {res.n_duplicates} repeated pose(s) counted once")
     if res.bop:
         b = res.bop
         print(f"BOP: AR {b['ar']:.2f} (VSD {b['ar_vsd']:.2f}, MSSD {b['ar_mssd']:.2f}, MSPD {b['ar_mspd']:.2f}); "

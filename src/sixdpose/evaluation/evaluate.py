@@ -12,11 +12,19 @@ Protocol (paper section V-A; matching as in the BOP toolkit):
 * Accuracy against the threshold (0-20 % of the diameter, :attr:`EvalResult.curve`): the same matching
   redone at each threshold.
 * Timing: frames per second = images in the results / sum of their per-image times (each image's
-  time once); instances per second = estimates / the same total. Times exclude disk reads.
+  time once); instances per second = estimates / the same total. Times exclude disk reads. A time that
+  is negative or not finite is refused (:class:`EvaluationError`).
+* Rows checked before scoring (:func:`check_estimates`): a row whose ``R`` is not a rotation
+  (``max |R^T R - I| > ROTATION_TOL`` or ``det R <= 0``), with a non-finite value, or with an
+  ``obj_id`` the dataset does not have is *rejected*: never credited, counted in ``n_rejected`` and
+  named in one warning line. A row that repeats an earlier row's pose (same image, object, R and t,
+  whatever its score) is counted once, the first one kept (``n_duplicates``, one warning line).
 """
 
 from __future__ import annotations
 
+import json
+import logging
 import math
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -30,10 +38,14 @@ from ..constants import ADD_THRESHOLD, MIN_VISIBLE_PX
 from ..datasets.base import DatasetReader
 from ..datasets.readers import as_reader
 from ..errors import SixdposeError
-from ..fileio import atomic_write_json
+from ..fileio import atomic_write_text
 from . import bop as bop_scores
 from . import metrics
 
+log = logging.getLogger(__name__)
+
+#: Largest ``max |R^T R - I|`` of a results row's R that counts as a rotation.
+ROTATION_TOL = 1e-3
 
 class EvaluationError(SixdposeError):
     """Results and dataset do not fit together (unknown images or objects)."""
@@ -74,6 +86,8 @@ class EvalResult:
         curve: accuracy against the threshold: ``{"threshold_pct": [...], "accuracy": [...]}``, the
             threshold in % of the object's diameter (:data:`CURVE_THRESHOLDS_PCT`, 0-20 %), the accuracy
             in % of the counted GT instances, each point with the matching redone at that threshold.
+        n_rejected: results rows not scored (not a rotation, non-finite, unknown obj_id), listed in
+            ``rejected`` as ``(scene_id, im_id, obj_id, reason)``. n_duplicates: exact repeats counted once.
     """
 
     per_object: dict
@@ -89,10 +103,13 @@ class EvalResult:
     records: list = field(default_factory=list)
     bop: dict = field(default_factory=dict)
     curve: dict = field(default_factory=dict)
+    n_rejected: int = 0
+    n_duplicates: int = 0
+    rejected: list = field(default_factory=list)
 
     def summary(self) -> dict:
         """The scalar fields (and the BOP scores) as a dict (JSON-serialisable)."""
-        return {k: v for k, v in self.__dict__.items() if k not in ("per_object", "records")}
+        return {k: v for k, v in self.__dict__.items() if k not in ("per_object", "records", "rejected")}
 
 
 #: Thresholds of :attr:`EvalResult.curve`, % of the object's diameter: 0, 0.5, ..., 20.
@@ -114,6 +131,65 @@ def greedy_match(err: np.ndarray, limit: float) -> list[int | None]:
         if cand:
             match[min(cand)[1]] = i
     return match
+
+
+def rotation_problem(R) -> str:
+    """Why ``R`` is not a rotation matrix (``""`` if it is, within :data:`ROTATION_TOL`)."""
+    R = np.asarray(R, dtype=np.float64)
+    if R.shape != (3, 3):
+        return f"R has shape {R.shape}, not (3, 3)"
+    if not np.isfinite(R).all():
+        return "R is not finite"
+    dev = float(np.abs(R.T @ R - np.eye(3)).max())
+    if dev > ROTATION_TOL:
+        return f"R is not orthonormal (max |R^T R - I| = {dev:.3g} > {ROTATION_TOL:g})"
+    if np.linalg.det(R) <= 0:
+        return "R is a reflection (det R = -1), not a rotation"
+    return ""
+
+
+def check_estimates(estimates, object_ids) -> tuple[list[PoseEstimate], list[tuple], int]:
+    """Split results rows into those that can be scored and those that cannot (see the module docstring).
+
+    Args:
+        estimates: :class:`~sixdpose.artifacts.poses.PoseEstimate` rows. object_ids: the dataset's obj_ids.
+    Returns:
+        ``(kept, rejected, n_duplicates)``: the rows to score (repeated poses dropped), ``(scene_id,
+        im_id, obj_id, reason)`` of each rejected row, and the number of repeats dropped.
+    Raises:
+        EvaluationError: a row's time is negative or not finite.
+    """
+    known = set(int(o) for o in object_ids)
+    kept, rejected, seen, n_dup = [], [], set(), 0
+    for e in estimates:
+        if not (math.isfinite(float(e.time)) and e.time >= 0):
+            raise EvaluationError(f"results: scene {e.scene_id} image {e.im_id} obj {e.obj_id}: time {e.time!r} s; "
+                                  "times must be finite and >= 0")
+        R = np.asarray(e.R, dtype=np.float64)
+        t = np.asarray(e.t, dtype=np.float64)
+        reason = ""
+        if int(e.obj_id) not in known:
+            reason = f"obj_id {e.obj_id} is not an object of the dataset"
+        elif not math.isfinite(float(e.score)) or t.shape != (3,) or not np.isfinite(t).all():
+            reason = "non-finite score or t"
+        else:
+            reason = rotation_problem(R)
+        if reason:
+            rejected.append((int(e.scene_id), int(e.im_id), int(e.obj_id), reason))
+            continue
+        key = (int(e.scene_id), int(e.im_id), int(e.obj_id), R.tobytes(), t.tobytes())
+        if key in seen:
+            n_dup += 1
+            continue
+        seen.add(key)
+        kept.append(e)
+    if rejected:
+        s, i, o, why = rejected[0]
+        log.warning("%d results row(s) rejected and not credited (first: scene %d image %d obj %d: %s)",
+                    len(rejected), s, i, o, why)
+    if n_dup:
+        log.warning("%d results row(s) repeat the pose of an earlier row; each pose is counted once", n_dup)
+    return kept, rejected, n_dup
 
 
 def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate], min_px: int = MIN_VISIBLE_PX,
@@ -140,15 +216,22 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
     from tqdm import tqdm
 
     dataset = as_reader(dataset)
+    names = dataset.object_ids
+    estimates = list(estimates)
+    # images with rows, rejected ones included: a rejected row leaves its GT instances counted, not skipped
+    row_time: dict[tuple[int, int], float] = {}
+    for e in estimates:
+        k = (int(e.scene_id), int(e.im_id))
+        row_time[k] = max(row_time.get(k, 0.0), float(e.time))
+    estimates, rejected, n_dup = check_estimates(estimates, names)
     by_img: dict[tuple[int, int], list[PoseEstimate]] = defaultdict(list)
     for e in estimates:
         by_img[(e.scene_id, e.im_id)].append(e)
     keys = dataset.keys()
     known = set(keys)
-    unknown = [k for k in by_img if k not in known]
+    unknown = [k for k in row_time if k not in known]
     if unknown:
         raise EvaluationError(f"results refer to image(s) not in {dataset.location}, e.g. scene {unknown[0][0]} image {unknown[0][1]}")
-    names = dataset.object_ids
     n_gt_obj: dict[int, int] = defaultdict(int)
     n_ok_obj: dict[int, int] = defaultdict(int)
     records = []
@@ -160,7 +243,7 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
             raise EvaluationError(f"images not in {dataset.location}, e.g. scene {missing[0][0]} image {missing[0][1]}")
         eval_keys = [k for k in keys if k in want]
     else:
-        eval_keys = [k for k in keys if k in by_img] if by_img else keys
+        eval_keys = [k for k in keys if k in row_time] if row_time else keys
     bop_err: dict[int, list] = defaultdict(list)
     syms: dict[int, list] = {}
     rel_err: list[np.ndarray] = []  # per image and object: (estimates, GT) errors / diameter
@@ -207,8 +290,8 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
     curve = {"threshold_pct": list(CURVE_THRESHOLDS_PCT),
              "accuracy": [100.0 * sum(sum(m is not None for m in greedy_match(e, pct / 100.0)) for e in rel_err) / n_gt
                           if n_gt else float("nan") for pct in CURVE_THRESHOLDS_PCT]}
-    img_time = {k: max(e.time for e in v) for k, v in by_img.items()}
-    total = float(sum(t for t in img_time.values() if t >= 0))
+    img_time = row_time  # each image once (its rows repeat the image's time)
+    total = float(sum(img_time.values()))
     n_est = sum(len(v) for v in by_img.values())
     return EvalResult(
         per_object=per_object,
@@ -224,7 +307,23 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
         records=records,
         bop=bop_all,
         curve=curve,
+        n_rejected=len(rejected),
+        n_duplicates=n_dup,
+        rejected=rejected,
     )
+
+
+def _json_ready(v):
+    """``v`` with NaN/inf floats replaced by None (JSON has no NaN), recursively."""
+    if isinstance(v, dict):
+        return {k: _json_ready(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_json_ready(x) for x in v]
+    if isinstance(v, (float, np.floating)):
+        return float(v) if math.isfinite(v) else None
+    if isinstance(v, np.integer):
+        return int(v)
+    return v
 
 
 def _nanmean(values) -> float:
@@ -274,5 +373,6 @@ def write_tables(res: EvalResult, out_dir: str | Path, label: str = "method") ->
     write_table([{"method": label, "n_images": res.n_images, "n_estimates": res.n_estimates, "total_time_s": res.total_time,
                   "fps": res.fps, "instances_per_s": res.instances_per_s}],
                 ["method", "n_images", "n_estimates", "total_time_s", "fps", "instances_per_s"], paths["timing"])
-    paths["summary"] = atomic_write_json(out / "summary.json", dict(res.summary(), label=label))
+    summary = json.dumps(_json_ready(dict(res.summary(), label=label)), indent=1, allow_nan=False)
+    paths["summary"] = atomic_write_text(out / "summary.json", summary + "\n")  # NaN (undefined) -> null
     return paths

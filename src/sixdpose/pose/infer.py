@@ -258,7 +258,7 @@ def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: 
     Returns:
         ``(estimates, estimator)``.
     Raises:
-        PredictionError (a corrupt prediction file, named), CheckpointError, PoseError, DatasetError.
+        PredictionError (a corrupt prediction file, named; masks of another dataset), CheckpointError, PoseError, DatasetError.
     """
     from ..datasets.readers import as_reader
 
@@ -267,6 +267,10 @@ def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: 
                                  reader=reader, score_thresh=score_thresh)
     if masks != "gt" and not Path(masks).is_dir():
         raise PoseError(f"{masks}: prediction directory not found (use --masks gt for ground-truth masks)")
+    if masks != "gt":
+        from ..artifacts.predictions import check_predictions_dataset
+
+        check_predictions_dataset(masks, reader)  # masks of another dataset are refused
     keys = reader.keys()
     keys = [keys[i] for i in indices] if indices is not None else (keys[:limit] if limit else keys)
     out: list[PoseEstimate] = []

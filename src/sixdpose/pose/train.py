@@ -97,6 +97,10 @@ class PoseTask(TrainTask):
         reader = as_reader(self.data, split="train")
         if self.masks != "gt" and not Path(self.masks).is_dir():
             raise PoseError(f"{self.masks}: prediction directory not found (use --masks gt for ground-truth masks)")
+        if self.masks != "gt":
+            from ..artifacts.predictions import check_predictions_dataset
+
+            check_predictions_dataset(self.masks, reader)  # masks of another dataset are refused
         if self.kind == "refiner":
             from .infer import load_posenet
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..artifacts.poses import PoseEstimate
-from ..artifacts.predictions import read_predictions
+from ..artifacts.predictions import check_predictions_dataset, read_predictions
 from ..constants import MIN_DETECTION_SCORE
 from ..datasets.base import DatasetError, DatasetReader, check_depth_scale
 from ..datasets.readers import as_reader
@@ -132,7 +132,7 @@ def check_inputs(ds: DatasetReader, masks: str) -> None:
 
     Raises:
         RegistrationError: no images, no depth, no GT masks (with ``masks="gt"``), or a missing
-            prediction directory. DatasetError: the depth looks wrongly scaled
+            prediction directory. PredictionError: predicted masks made on another dataset. DatasetError: the depth looks wrongly scaled
             (:func:`~sixdpose.datasets.base.check_depth_scale`).
     """
     if len(ds) == 0:
@@ -144,6 +144,8 @@ def check_inputs(ds: DatasetReader, masks: str) -> None:
             raise RegistrationError(f"{ds.location}: this split has no ground-truth masks (mask_visib/); pass --masks PRED_DIR")
     elif not Path(masks).is_dir():
         raise RegistrationError(f"{masks}: predicted-mask directory not found")
+    else:
+        check_predictions_dataset(masks, ds)  # masks of another dataset are refused
     if ds.has_masks:
         check_depth_scale(ds)  # a wrong depth unit would give silently wrong poses
 

@@ -27,7 +27,8 @@ import numpy as np
 from ..datasets.base import DatasetError
 from ..datasets.readers import open_dataset
 from .data import ClassMap
-from ..artifacts.predictions import read_predictions
+from ..artifacts.predictions import (check_predictions_dataset, read_coco_results, read_predictions,
+                                     read_predictions_meta)
 from .infer import coco_image_id, encode_rle
 
 log = logging.getLogger("sixdpose.segmentation")
@@ -159,13 +160,15 @@ def open_segmented(data: str | Path, pred_dir: str | Path):
         ``(dataset, meta, index)`` with ``meta`` the prediction directory's ``meta.json`` and ``index``
         mapping ``(scene_id, im_id)`` to a dataset index.
     Raises:
-        DatasetError: ``pred_dir`` has no ``meta.json``.
+        DatasetError: ``pred_dir`` has no ``meta.json``. PredictionError: ``meta.json`` is corrupt or
+            lacks ``classes`` / ``images``, or the masks were predicted on another dataset.
     """
     meta_path = Path(pred_dir) / "meta.json"
     if not meta_path.is_file():
         raise DatasetError(f"{meta_path}: not a prediction directory of `sixdpose segment` (no meta.json)")
-    meta = json.loads(meta_path.read_text())
+    meta = read_predictions_meta(pred_dir, required=("classes", "images"))
     ds = open_dataset(data, split=meta.get("split") or "test")
+    check_predictions_dataset(pred_dir, ds)
     index = {tuple(map(int, k)): i for i, k in enumerate(ds.keys())}
     return ds, meta, index
 
@@ -195,10 +198,8 @@ def evaluate(data: str | Path, pred_dir: str | Path, out_dir: str | Path | None 
     if missing:
         raise DatasetError(f"{data}: {len(missing)} segmented image(s) are not in the dataset (first {missing[0]})")
     gt, stats = coco_ground_truth((ds[index[k]] for k in wanted), classes)
-    res_path = pred_dir / "coco_results.json"
-    if res_path.is_file():
-        results = json.loads(res_path.read_text())
-    else:  # rebuild from the npz files
+    results = read_coco_results(pred_dir)
+    if results is None:  # rebuild from the npz files
         results = []
         for s, i in wanted:
             for d in read_predictions(pred_dir, s, i):

@@ -19,7 +19,7 @@ import torch
 
 from ..artifacts.predictions import write_predictions, write_predictions_meta
 from ..datasets.base import DatasetError
-from ..datasets.readers import as_reader
+from ..datasets.readers import as_reader, dataset_fingerprint
 from ..errors import ConfigError
 from ..fileio import atomic_write_json, claim_output_dir
 from ..runs import pick_device
@@ -214,6 +214,7 @@ def segment(
         "score_thresh": seg.cfg.score_thresh,
         "data": str(Path(ds.location).resolve()),
         "split": reader_split,  # reader split (BOP split directory; ignored by the synthetic layout)
+        "dataset_fingerprint": dataset_fingerprint(ds),  # consumers refuse masks of another dataset
         "subset": subset,
         "images": images,
         "format": "sixdpose.artifacts.predictions: npz per image, masks (N,H,W) bool, labels (N,) int32 obj_id, "
