@@ -31,7 +31,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..config import Config, from_profile
+from ..config import Config, bounded, from_profile
 
 TRANSLATIONS = ("absolute", "centroid_offset")
 ROTATIONS = ("quaternion", "6d")
@@ -103,34 +103,34 @@ class PoseConfig(Config):
     """
 
     profile: str = "paper"
-    width: float = 1.0
-    emb_dim: int = 32
-    crop: int = 0
-    crop_margin: float = 0.1
+    width: float = bounded(1.0, min=0, max=16, min_open=True)
+    emb_dim: int = bounded(32, min=1, max=4096)
+    crop: int = bounded(0, min=0, max=4096)
+    crop_margin: float = bounded(0.1, min=0, max=10)
     translation: str = "absolute"
     rotation: str = "quaternion"
     norm: str = "none"
-    num_points: int = 500
-    num_model_points: int = 500
-    min_points: int = 10
-    rgb_noise: float = 0.3
-    colour_jitter: float = 0.0
-    max_images: int = 0
-    repeat: int = 1
-    num_workers: int = 2
-    epochs: int = 100
-    batch_size: int = 8
-    lr: float = 1e-4
-    warmup_steps: int = 1000
-    lr_step_epochs: int = 5
-    lr_gamma: float = 0.6
-    weight_decay: float = 0.0
-    grad_clip: float = 0.0
+    num_points: int = bounded(500, min=1, max=100_000)
+    num_model_points: int = bounded(500, min=1, max=100_000)
+    min_points: int = bounded(10, min=1, max=100_000)
+    rgb_noise: float = bounded(0.3, min=0, max=1)
+    colour_jitter: float = bounded(0.0, min=0, max=1, max_open=True)
+    max_images: int = bounded(0, min=0)
+    repeat: int = bounded(1, min=1, max=10_000)
+    num_workers: int = bounded(2, min=0, max=256)
+    epochs: int = bounded(100, min=1, max=100_000)
+    batch_size: int = bounded(8, min=1, max=1024)
+    lr: float = bounded(1e-4, min=0, max=10, min_open=True)
+    warmup_steps: int = bounded(1000, min=0, max=100_000_000)
+    lr_step_epochs: int = bounded(5, min=1, max=100_000)
+    lr_gamma: float = bounded(0.6, min=0, max=1, min_open=True)
+    weight_decay: float = bounded(0.0, min=0, max=1)
+    grad_clip: float = bounded(0.0, min=0, max=1e6)
     amp: bool = True
-    time_budget: float = 0.0
-    seed: int = 0
-    num_threads: int = 0
-    log_every: int = 10
+    time_budget: float = bounded(0.0, min=0, max=30 * 24 * 3600.0)
+    seed: int = bounded(0, min=0, max=2**32 - 1)
+    num_threads: int = bounded(0, min=0, max=1024)
+    log_every: int = bounded(10, min=1, max=1_000_000)
 
     def validate(self) -> None:
         """Check every field (ValueError naming the field)."""
@@ -173,29 +173,29 @@ class RefinerConfig(Config):
     """
 
     profile: str = "paper"
-    width: float = 1.0
-    iterations: int = 2
-    noise_rot_deg: float = 15.0
-    noise_trans: float = 0.02
-    num_points: int = 500
-    num_model_points: int = 500
-    min_points: int = 10
-    max_images: int = 0
-    repeat: int = 1
-    num_workers: int = 2
-    epochs: int = 100
-    batch_size: int = 8
-    lr: float = 1e-3
-    warmup_steps: int = 0
-    lr_step_epochs: int = 10
-    lr_gamma: float = 0.6
-    weight_decay: float = 0.0
-    grad_clip: float = 0.0
+    width: float = bounded(1.0, min=0, max=16, min_open=True)
+    iterations: int = bounded(2, min=1, max=100)
+    noise_rot_deg: float = bounded(15.0, min=0, max=180)
+    noise_trans: float = bounded(0.02, min=0, max=10)
+    num_points: int = bounded(500, min=1, max=100_000)
+    num_model_points: int = bounded(500, min=1, max=100_000)
+    min_points: int = bounded(10, min=1, max=100_000)
+    max_images: int = bounded(0, min=0)
+    repeat: int = bounded(1, min=1, max=10_000)
+    num_workers: int = bounded(2, min=0, max=256)
+    epochs: int = bounded(100, min=1, max=100_000)
+    batch_size: int = bounded(8, min=1, max=1024)
+    lr: float = bounded(1e-3, min=0, max=10, min_open=True)
+    warmup_steps: int = bounded(0, min=0, max=100_000_000)
+    lr_step_epochs: int = bounded(10, min=1, max=100_000)
+    lr_gamma: float = bounded(0.6, min=0, max=1, min_open=True)
+    weight_decay: float = bounded(0.0, min=0, max=1)
+    grad_clip: float = bounded(0.0, min=0, max=1e6)
     amp: bool = True
-    time_budget: float = 0.0
-    seed: int = 0
-    num_threads: int = 0
-    log_every: int = 10
+    time_budget: float = bounded(0.0, min=0, max=30 * 24 * 3600.0)
+    seed: int = bounded(0, min=0, max=2**32 - 1)
+    num_threads: int = bounded(0, min=0, max=1024)
+    log_every: int = bounded(10, min=1, max=1_000_000)
 
     def validate(self) -> None:
         """Check every field (ValueError naming the field)."""

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..config import Config, from_profile
+from ..config import Config, bounded, from_profile
 
 
 @dataclass(frozen=True)
@@ -83,45 +83,45 @@ class SegConfig(Config):
     # model
     backbone: str = "resnet50"
     pretrained: bool = True
-    trainable_layers: int = 5
-    fpn_channels: int = 256
-    box_head_dim: int = 1024
-    mask_head_channels: int = 256
-    min_size: int = 480
-    max_size: int = 800
-    train_min_sizes: tuple[int, ...] = (384, 416, 448, 480, 512, 544, 576)
-    anchor_sizes: tuple[int, ...] = (32, 64, 128, 256, 512)
-    rpn_pre_nms_train: int = 2000
-    rpn_post_nms_train: int = 2000
-    rpn_pre_nms_test: int = 1000
-    rpn_post_nms_test: int = 1000
-    rpn_batch_size: int = 256
-    box_batch_size: int = 512
-    detections_per_img: int = 100
-    score_thresh: float = 0.05
+    trainable_layers: int = bounded(5, min=0, max=5)
+    fpn_channels: int = bounded(256, min=1, max=4096)
+    box_head_dim: int = bounded(1024, min=1, max=65536)
+    mask_head_channels: int = bounded(256, min=1, max=4096)
+    min_size: int = bounded(480, min=1, max=8192)
+    max_size: int = bounded(800, min=1, max=8192)
+    train_min_sizes: tuple[int, ...] = bounded((384, 416, 448, 480, 512, 544, 576), min=1, max=8192)
+    anchor_sizes: tuple[int, ...] = bounded((32, 64, 128, 256, 512), min=1, max=8192)
+    rpn_pre_nms_train: int = bounded(2000, min=1, max=100_000)
+    rpn_post_nms_train: int = bounded(2000, min=1, max=100_000)
+    rpn_pre_nms_test: int = bounded(1000, min=1, max=100_000)
+    rpn_post_nms_test: int = bounded(1000, min=1, max=100_000)
+    rpn_batch_size: int = bounded(256, min=1, max=100_000)
+    box_batch_size: int = bounded(512, min=1, max=100_000)
+    detections_per_img: int = bounded(100, min=1, max=10_000)
+    score_thresh: float = bounded(0.05, min=0, max=1)
     # optimisation
-    epochs: int = 100
-    batch_size: int = 4
-    lr: float = 1e-3
-    lr_step_epochs: int = 30
-    lr_gamma: float = 0.1
-    weight_decay: float = 0.0
-    grad_clip: float = 10.0
-    max_steps_per_epoch: int = 0
+    epochs: int = bounded(100, min=1, max=100_000)
+    batch_size: int = bounded(4, min=1, max=1024)
+    lr: float = bounded(1e-3, min=0, max=10, min_open=True)
+    lr_step_epochs: int = bounded(30, min=1, max=100_000)
+    lr_gamma: float = bounded(0.1, min=0, max=1, min_open=True)
+    weight_decay: float = bounded(0.0, min=0, max=1)
+    grad_clip: float = bounded(10.0, min=0, max=1e6)
+    max_steps_per_epoch: int = bounded(0, min=0)
     amp: bool = True
     # data
-    val_fraction: float = 0.1
+    val_fraction: float = bounded(0.1, min=0, max=1, max_open=True)
     split_by: str = "image"
     train_split: str = "train"
     test_split: str = "test"
-    min_mask_pixels: int = 1
-    color_jitter: tuple[float, float, float, float] = (0.3, 0.3, 0.3, 0.03)
-    hflip_prob: float = 0.0
-    num_workers: int = 2
+    min_mask_pixels: int = bounded(1, min=0, max=10_000_000)
+    color_jitter: tuple[float, float, float, float] = bounded((0.3, 0.3, 0.3, 0.03), min=0, max=10)
+    hflip_prob: float = bounded(0.0, min=0, max=1)
+    num_workers: int = bounded(2, min=0, max=256)
     # misc
-    seed: int = 0
-    num_threads: int = 0
-    log_every: int = 1
+    seed: int = bounded(0, min=0, max=2**32 - 1)
+    num_threads: int = bounded(0, min=0, max=1024)
+    log_every: int = bounded(1, min=1, max=1_000_000)
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first invalid field."""
