@@ -118,7 +118,8 @@ def _num(x) -> str:
     return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f"{x:g}"
 
 
-def _bounds_text(md) -> str:
+def bounds_text(md) -> str:
+    """Declared bounds in words (`` in [1, 10000]``, `` >= 0``) from field metadata (:func:`bounded`)."""
     lo, hi = md.get("min"), md.get("max")
     if lo is not None and hi is not None:
         return f" in {'(' if md.get('min_open') else '['}{_num(lo)}, {_num(hi)}{')' if md.get('max_open') else ']'}"
@@ -149,10 +150,10 @@ def check_fields(cfg) -> None:
         v, hint = getattr(cfg, f.name), hints.get(f.name)
         if hint is not None and not _fits(hint, v):
             raise ConfigError(f"{cls.__name__}: {f.name}={v!r} is not allowed: expected {_describe(hint)}"
-                              f"{_bounds_text(f.metadata)}")
+                              f"{bounds_text(f.metadata)}")
         if f.metadata and not _in_bounds(f.metadata, v):
             raise ConfigError(f"{cls.__name__}: {f.name}={v!r} is out of range: expected {_describe(hint)}"
-                              f"{_bounds_text(f.metadata)}")
+                              f"{bounds_text(f.metadata)}")
 
 
 class Config:

@@ -31,19 +31,10 @@ from .errors import OutputError
 SEED_MAX = 2**32 - 1
 
 
-def _num(x) -> str:
-    """A bound as written: 10000, not 1e+04."""
-    return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f"{x:g}"
-
-
 def _range_text(lo, hi, lo_open: bool = False, hi_open: bool = False) -> str:
-    if lo is not None and hi is not None:
-        return f" in {'(' if lo_open else '['}{_num(lo)}, {_num(hi)}{')' if hi_open else ']'}"
-    if lo is not None:
-        return f" {'>' if lo_open else '>='} {_num(lo)}"
-    if hi is not None:
-        return f" {'<' if hi_open else '<='} {_num(hi)}"
-    return ""
+    from .config import bounds_text
+
+    return bounds_text({"min": lo, "max": hi, "min_open": lo_open, "max_open": hi_open})
 
 
 @dataclass(frozen=True)
@@ -221,6 +212,10 @@ OPTIONS: dict[str, Opt] = {o.flag: o for o in (
     Opt("--result-name", "result_name", "result artifact name (RESULTS_DIR/NAME.json)", type=Name(), default=None,
         metavar="NAME"),
     Opt("--results-dir", "results_dir", "directory of result artifacts (default: results)", default="results"),
+    Opt("--batch-size", "batch_size", "images per step (training) or per forward pass (inference)",
+        type=Int(1, MAX_BATCH), default=None),
+    Opt("--val", "val", "held-out dataset scored every epoch (ADD(-S) %% into metrics.csv), e.g. data/val",
+        default=None),
     Opt("--pose", "pose", "run directory of train-pose", required=True),
     Opt("--seg", "ckpt", "run directory of train-seg (or a checkpoint file)", required=True, aliases=("--ckpt",)),
 )}
@@ -232,6 +227,7 @@ PER_COMMAND: dict[tuple[str, str], dict] = {
                                 "help": "parallel scene workers (default 1)"},
     ("register", "--workers"): {"default": 2, "type": Int(1, MAX_WORKERS), "help": "processes (default 2)"},
     # data loaders: 0 loads in the main process
+    ("segment", "--batch-size"): {"default": 4, "help": "images per forward pass (default 4)"},
     ("segment", "--workers"): {"default": 0, "help": "image-loading worker processes (0: in the main process)"},
     ("train-seg", "--workers"): {"help": "data-loading worker processes (default: the config's num_workers)"},
     # segment keeps every detection above the run's own low threshold (AP needs the full curve)
@@ -261,8 +257,9 @@ def spec(command: str, flag: str) -> Opt:
     return dataclasses.replace(o, **per) if per else o
 
 
-def add(parser: argparse.ArgumentParser, flag: str, **changes) -> argparse.Action:
-    """Add the shared option ``flag`` (canonical spelling) with its hidden aliases to a subparser.
+def add(parser: argparse.ArgumentParser, flag: str, group=None, **changes) -> argparse.Action:
+    """Add the shared option ``flag`` (canonical spelling) with its hidden aliases to a subparser
+    (into its argument ``group`` if given).
 
     ``changes`` may set ``help`` (the command's wording), ``required``, ``choices`` or ``metavar``:
     the type, range and default come from this module (:data:`OPTIONS`, :data:`PER_COMMAND`).
@@ -284,7 +281,7 @@ def add(parser: argparse.ArgumentParser, flag: str, **changes) -> argparse.Actio
         kw["required"] = True
         kw.pop("default")
     names = (o.short, o.flag) if o.short else (o.flag,)
-    action = parser.add_argument(*names, **kw)
+    action = (group or parser).add_argument(*names, **kw)
     add_aliases(parser, action, o.aliases)
     return action
 
