@@ -16,7 +16,8 @@ def register(sub) -> None:
     p.add_argument("--objects", nargs="+", default=None, help="object names (default: all 46)")
     p.add_argument("--base-url", default=DEFAULT_BASE_URL, help="archive location (default: the official YCB site)")
     p.add_argument("--overwrite", action="store_true", help="download again objects already present")
-    p.add_argument("--timeout", type=O.Float(0.0, 3600.0, lo_open=True), default=60.0, help="network timeout in seconds")
+    p.add_argument("--timeout", type=O.Float(0.0, 3600.0, lo_open=True), default=60.0,
+                   help="network timeout in seconds")
     O.add(p, "--no-progress")
     p.set_defaults(func=_run)
 

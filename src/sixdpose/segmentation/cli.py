@@ -118,9 +118,11 @@ def register(subparsers) -> None:
     O.add(p, "--seed", help="seed of split, initialisation and augmentation")
     p.add_argument("--val-fraction", dest="val_fraction", type=O.field_type(SegConfig, "val_fraction"),
                    help="held-out share of a synthetic dataset")
-    p.add_argument("--max-steps-per-epoch", dest="max_steps_per_epoch", type=O.field_type(SegConfig, "max_steps_per_epoch"),
+    p.add_argument("--max-steps-per-epoch", dest="max_steps_per_epoch",
+                   type=O.field_type(SegConfig, "max_steps_per_epoch"),
                    help="cap steps per epoch (0: none)")
-    p.add_argument("--train-split", dest="train_split", type=O.Name(), help="BOP split used for training (default train)")
+    p.add_argument("--train-split", dest="train_split", type=O.Name(),
+                   help="BOP split used for training (default train)")
     p.add_argument("--test-split", dest="test_split", type=O.Name(), help="BOP split used for testing (default test)")
     O.add(p, "--workers")
     O.add(p, "--threads")
