@@ -236,6 +236,8 @@ PER_COMMAND: dict[tuple[str, str], dict] = {
     ("register", "--min-px"): {"default": 0, "help": "with GT masks, skip instances with fewer visible pixels"},
     ("pose-ablation", "--limit"): {"help": "score on the first N images of --val (0: all)"},
     ("fetch-ycb", "--out"): {"help": "destination asset directory"},
+    ("evaluate", "--out"): {"required": False, "default": None,
+                            "help": "output directory (default: next to the results, <results>_eval)"},
     ("generate", "--profile"): {"default": "demo"},
     ("register", "--profile"): {"default": "default"},
     ("pose-ablation", "--profile"): {"default": "cpu"},

@@ -14,7 +14,7 @@ def register(sub) -> None:
     O.add(p, "--data")
     p.add_argument("--results", required=True, help="BOP results CSV (from `sixdpose register`)")
     O.add(p, "--split")
-    p.add_argument("--out", default=None, help="output directory (default: next to the results, <results>_eval)")
+    O.add(p, "--out")
     O.add(p, "--min-px")
     p.add_argument("--threshold", type=O.Float(0.0, 10.0, lo_open=True), default=0.1,
                    help="correct if ADD(-S) < threshold x diameter")

@@ -201,7 +201,7 @@ def register(subparsers) -> None:
 
     p = subparsers.add_parser("pose-ablation", help="train each option of the paper's architecture alone and score it on val",
                               description="The ablation of section IV-C's choices: each variant (indices: " + "; ".join(
-                                  f"{k} {n}" for k, n in enumerate(VARIANTS)) + ") trained on --train with the same "
+                                  f"{k} {n}" for k, n in enumerate(VARIANTS)) + ") trained on --data with the same "
                               "budget and scored by ADD(-S) on --val (never test). Resumable: finished variants are "
                               "scored, not retrained. Writes OUT/<k>_<variant>/ runs, OUT/ablation.csv/.tex and the "
                               "result artifact RESULTS_DIR/NAME.json.")
