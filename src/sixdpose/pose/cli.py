@@ -181,8 +181,8 @@ def register(subparsers) -> None:
     O.add(p, "--data")
     O.add(p, "--pose")
     p.add_argument("--refiner", default=None, help="run directory of train-refiner")
-    p.add_argument("--iterations", type=O.field_type(RefinerConfig, "iterations"), default=None,
-                   help="refinement iterations (default: the refiner's, 2)")
+    p.add_argument("--iterations", type=O.Int(0, RefinerConfig.__dataclass_fields__["iterations"].metadata["max"]),
+                   default=None, help="refinement iterations (default: the refiner's, 2; 0: none)")
     O.add(p, "--masks")
     O.add(p, "--score-thresh")
     p.add_argument("--icp", action="store_true", help="refine every pose with Open3D ICP (the hybrid stage's)")

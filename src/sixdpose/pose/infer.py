@@ -99,7 +99,9 @@ class Estimator:
 
     def __init__(self, pose, refiner=None, *, iterations: int | None = None, device: str | None = None, icp: bool = False,
                  colour_verify: bool = False, reader=None, score_thresh: float = 0.5, seed: int = 0, max_batch: int = 64):
-        dev = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
+        from ..runs import pick_device
+
+        dev = pick_device(device)  # auto / None: the GPU when present
         pose_ckpt = ck.load(pose, kind="pose")
         net, cfg = load_posenet(pose_ckpt, dev)
         refiner_ckpt, ref_net, ref_cfg = None, None, None

@@ -74,6 +74,7 @@ def _cmd_segment(args) -> int:
         score_thresh=args.score_thresh,
         num_workers=args.workers,
         progress=not args.no_progress,
+        overrides=parse_overrides(args.overrides),
     )
     print(
         f"segmented {r['images']} image(s), {r['detections']} detection(s), "
@@ -151,6 +152,7 @@ def register(subparsers) -> None:
     O.add(p, "--device")
     O.add(p, "--no-progress")
     O.add(p, "--verbose")
+    add_set_option(p)
     p.set_defaults(func=_cmd_segment)
 
     p = subparsers.add_parser(

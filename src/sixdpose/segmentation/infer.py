@@ -44,6 +44,25 @@ def encode_rle(mask: np.ndarray) -> dict:
     return rle
 
 
+#: Fields of a run's :class:`~.config.SegConfig` that ``segment --set`` may change: they act at inference
+#: only (the test-time resize, the RPN's test proposals, the detections kept, mixed precision).
+INFERENCE_FIELDS = ("score_thresh", "detections_per_img", "min_size", "max_size", "rpn_pre_nms_test",
+                    "rpn_post_nms_test", "amp")
+
+
+def check_inference_overrides(overrides: dict | None) -> dict:
+    """``overrides`` (field -> value) checked before any work: only :data:`INFERENCE_FIELDS`, each of
+    the field's type and bounds (against the default config). Raises :class:`ConfigError`."""
+    overrides = dict(overrides or {})
+    bad = sorted(set(overrides) - set(INFERENCE_FIELDS))
+    if bad:
+        raise ConfigError(f"segment --set: {', '.join(bad)} cannot change at inference (allowed: "
+                          f"{', '.join(INFERENCE_FIELDS)})")
+    if overrides:
+        SegConfig().replace(**overrides)
+    return overrides
+
+
 class Segmenter:
     """A trained Mask R-CNN ready for inference.
 
@@ -51,17 +70,26 @@ class Segmenter:
         ckpt: a run directory (its ``model.pt``, else ``last.pt``) or a checkpoint file.
         device: ``cpu``/``cuda``/``auto`` (default: the GPU when present).
         score_thresh: override the run's minimum detection score.
+        overrides: other :data:`INFERENCE_FIELDS` of the run's config to change (``--set``).
     Raises:
         CheckpointError: the checkpoint is missing, corrupt or does not fit its config.
     """
 
-    def __init__(self, ckpt: str | Path, device: str | None = None, score_thresh: float | None = None):
+    def __init__(self, ckpt: str | Path, device: str | None = None, score_thresh: float | None = None,
+                 overrides: dict | None = None):
+        overrides = check_inference_overrides(overrides)
         c = ck.load(ckpt)
         self.path = ck.resolve(ckpt)
         try:
             cfg = SegConfig.from_dict(c["config"])
-            if score_thresh is not None:
-                cfg = cfg.replace(score_thresh=float(score_thresh))
+        except (ValueError, TypeError, KeyError) as e:
+            raise ck.CheckpointError(
+                f"{self.path}: incompatible checkpoint ({str(e).strip().splitlines()[0][:300]})"
+            ) from None
+        cfg = cfg.replace(**overrides)  # ConfigError (one line naming the field) for a bad --set
+        if score_thresh is not None:
+            cfg = cfg.replace(score_thresh=float(score_thresh))
+        try:
             classes = ClassMap.from_list(c["classes"])
             model, _ = build_model(cfg, len(classes), init=c.get("init", "random"))
             model.load_state_dict(c["model"])
@@ -133,6 +161,7 @@ def segment(
     score_thresh: float | None = None,
     num_workers: int = 0,
     progress: bool = True,
+    overrides: dict | None = None,
 ) -> dict:
     """Segment every image of a dataset (or of the run's train/test subset) and write ``out``.
 
@@ -149,13 +178,15 @@ def segment(
         score_thresh: minimum score kept (default: the run's ``score_thresh``, 0.05).
         num_workers: image-loading worker processes.
         progress: show a progress bar.
+        overrides: :data:`INFERENCE_FIELDS` of the run's config to change (``--set``).
     Returns:
         ``{"images": n, "detections": n, "seconds": s, "images_per_s": r, "pred_dir": str}``.
     Raises:
         CheckpointError, DatasetError (incl. a checkpoint trained on other objects than the dataset's).
     """
+    overrides = check_inference_overrides(overrides)
     claim_output_dir(out, "segment", create=False)  # refuse a foreign directory before loading anything
-    seg = Segmenter(ckpt, device=device, score_thresh=score_thresh)
+    seg = Segmenter(ckpt, device=device, score_thresh=score_thresh, overrides=overrides)
     if subset == "all":
         ds = as_reader(data, split=split)
         indices = list(range(len(ds)))
