@@ -8,6 +8,14 @@ error messages. Where a command needs another default or range for a concept (``
 worker processes, ``segment`` loads images in the main process), the difference is declared here too,
 in :data:`PER_COMMAND`, so every default of the command line is defined in this module.
 
+One spelling per concept: ``--out`` (every output; old ``--to``), ``--data`` (the input dataset; old
+``--train``), ``--masks`` (``gt`` or a prediction directory; old ``--pred``), ``--score-thresh`` (old
+``--min-score``), ``--profile`` (a stage's named config; old ``--preset``), ``--workers`` (processes:
+scene workers, registration pool, data loaders; old ``--num-workers``), ``--threads`` (torch CPU threads
+inside one process: another concept), ``--limit`` (first N images, 0 = all, everywhere; old
+``--val-images``), ``--seg`` / ``--pose`` / ``--refiner`` (a trained run, named by the network it holds;
+old ``--ckpt``), ``--device``, ``--split``, ``--no-progress``, ``-v/--verbose``, ``--set``.
+
 Values are checked while parsing: the argparse ``type=`` callables raise
 :class:`argparse.ArgumentTypeError`, which :class:`sixdpose.cli._Parser` prints as one line
 (``sixdpose CMD: error: argument --x: ...``, exit status 2) before anything is read or written.

@@ -1,6 +1,6 @@
 """Inference: a trained run -> per-image instance masks (the format the registration stage reads).
 
-Output of ``sixdpose segment --data DIR --ckpt RUN_DIR --out PRED_DIR``: the predicted-masks artifact
+Output of ``sixdpose segment --data DIR --seg RUN_DIR --out PRED_DIR``: the predicted-masks artifact
 (:mod:`sixdpose.artifacts.predictions`, its one writer and reader): ``PRED_DIR/<scene_id>_<im_id>.npz``
 per image, ``PRED_DIR/coco_results.json`` and ``PRED_DIR/meta.json`` (checkpoint, classes, images,
 score threshold).
@@ -194,7 +194,7 @@ def segment(
     elif subset in ("train", "test"):
         split_file = Path(ckpt) / "split.json"
         if not split_file.is_file():
-            raise DatasetError(f"{split_file}: --subset {subset} needs --ckpt to be a run directory with split.json")
+            raise DatasetError(f"{split_file}: --subset {subset} needs --seg to be a run directory with split.json")
         record = json.loads(split_file.read_text())
         ds, indices = open_part(data, record, subset)
         reader_split = record[subset]["split"]

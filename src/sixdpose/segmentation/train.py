@@ -8,7 +8,7 @@ Run directory ``RUN_DIR`` after training::
     run.json        classes, backbone initialisation, world size, device, versions
     metrics.csv     one row per logged step: epoch, step, lr, loss and each loss term, seconds
     last.pt         resumable checkpoint, rewritten atomically after every epoch
-    model.pt        final weights (what ``sixdpose segment --ckpt RUN_DIR`` loads)
+    model.pt        final weights (what ``sixdpose segment --seg RUN_DIR`` loads)
 
 Optimisation follows the paper (section IV-A): Adam, LR decayed by ``lr_gamma`` every
 ``lr_step_epochs`` epochs (a ``StepLR`` stepped once per epoch). On CUDA, mixed precision (autocast +
