@@ -431,6 +431,10 @@ def test_path_names():
     from sixdpose.errors import OutputError
     from sixdpose.fileio import check_path_name
 
+    from sixdpose.segmentation.config import profile_config
+
+    with pytest.raises(ConfigError, match="train_split"):
+        profile_config("smoke", train_split="../x")
     for ok in ("test", "train_synt", "_smoke", "pose_ablation_cpu", "a.b"):
         assert check_path_name(ok) == ok
     for bad in ("", ".", "..", "a/b", "../a", "/abs", "a\\b", " a", "a\0b"):

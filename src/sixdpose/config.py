@@ -25,8 +25,8 @@ from typing import Any, TypeVar
 
 import yaml
 
-from .errors import ConfigError
-from .fileio import atomic_write_text
+from .errors import ConfigError, OutputError
+from .fileio import atomic_write_text, check_path_name
 
 C = TypeVar("C", bound="Config")
 
@@ -64,6 +64,12 @@ def bounded(default, *, min=None, max=None, min_open: bool = False, max_open: bo
     md = {k: v for k, v in (("min", min), ("max", max)) if v is not None}
     md.update({k: True for k, v in (("min_open", min_open), ("max_open", max_open)) if v})
     return dataclasses.field(default=default, metadata=md)
+
+
+def path_name(default: str):
+    """A dataclass string field whose value becomes one component of a path (a split folder): checked
+    on construction like the command line's names (:func:`sixdpose.fileio.check_path_name`)."""
+    return dataclasses.field(default=default, metadata={"path_name": True})
 
 
 def _is_int(v) -> bool:
@@ -151,6 +157,11 @@ def check_fields(cfg) -> None:
         if hint is not None and not _fits(hint, v):
             raise ConfigError(f"{cls.__name__}: {f.name}={v!r} is not allowed: expected {_describe(hint)}"
                               f"{bounds_text(f.metadata)}")
+        if f.metadata.get("path_name") and isinstance(v, str):
+            try:
+                check_path_name(v, f"{cls.__name__}: {f.name}")
+            except OutputError as e:
+                raise ConfigError(str(e)) from None
         if f.metadata and not _in_bounds(f.metadata, v):
             raise ConfigError(f"{cls.__name__}: {f.name}={v!r} is out of range: expected {_describe(hint)}"
                               f"{bounds_text(f.metadata)}")

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..config import Config, bounded, from_profile
+from ..config import Config, bounded, from_profile, path_name
 
 
 @dataclass(frozen=True)
@@ -112,8 +112,8 @@ class SegConfig(Config):
     # data
     val_fraction: float = bounded(0.1, min=0, max=1, max_open=True)
     split_by: str = "image"
-    train_split: str = "train"
-    test_split: str = "test"
+    train_split: str = path_name("train")
+    test_split: str = path_name("test")
     min_mask_pixels: int = bounded(1, min=0, max=10_000_000)
     color_jitter: tuple[float, float, float, float] = bounded((0.3, 0.3, 0.3, 0.03), min=0, max=10)
     hflip_prob: float = bounded(0.0, min=0, max=1)
