@@ -282,6 +282,9 @@ def test_one_spelling_and_one_default_per_concept():
                     if spec.type is not None:
                         assert a.type == spec.type, (name, s)
                     assert set(getattr(a, "aliases", ())) == set(spec.aliases), (name, s)
+        for alias, canonical in O.ALIASES.items():  # every old spelling reaches the canonical option's action
+            if canonical in p._option_string_actions:
+                assert p._option_string_actions.get(alias) is p._option_string_actions[canonical], (name, alias)
         help_text = p.format_help()
         for alias in O.ALIASES:
             assert not re.search(rf"(?<![\w-]){re.escape(alias)}(?![\w-])", help_text), (name, alias)
