@@ -162,7 +162,8 @@ def _config_class(command: str):
 
 def test_every_command_with_a_config_has_set():
     with_set = {name for name, p in COMMANDS.items() if any(a.dest == "overrides" for a in p._actions)}
-    assert with_set == {"generate", "train-seg", "train-pose", "train-refiner", "register", "pose-ablation", "segment"}
+    assert with_set == {"generate", "train-seg", "train-pose", "train-refiner", "register", "pose-ablation", "segment",
+                        "predict-pose"}
 
 
 def test_segment_set_inference_fields(tmp_path, capsys):
@@ -181,6 +182,23 @@ def test_segment_set_inference_fields(tmp_path, capsys):
         assert not (tmp_path / "out").exists()
     assert check_inference_overrides({"detections_per_img": 10, "min_size": 320}) == {"detections_per_img": 10,
                                                                                         "min_size": 320}
+
+
+def test_predict_pose_set_inference_fields(tmp_path, capsys):
+    """predict-pose --set: only the pose run's inference fields (points per instance), checked before any work."""
+    from sixdpose.pose.config import PoseConfig
+    from sixdpose.pose.infer import INFERENCE_FIELDS, check_inference_overrides
+
+    out = tmp_path / "out.csv"
+    base = ["predict-pose", "--data", str(tmp_path / "d"), "--pose", str(tmp_path / "run"), "--out", str(out)]
+    cases = [c for c in _set_cases(PoseConfig) if c[1] in INFERENCE_FIELDS] + [("lr=0.1", "lr"), ("crop=64", "crop")]
+    assert len(cases) > 8
+    for kv, field in cases:
+        assert main([*base, "--set", kv]) == 2, kv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and field in err[0], (kv, err)
+        assert not out.exists()
+    assert check_inference_overrides({"num_points": 1000}) == {"num_points": 1000}
 
 
 @pytest.mark.parametrize("command", ["generate", "train-seg", "train-pose", "train-refiner", "register",
@@ -433,7 +451,6 @@ def test_read_only_output_dirs(tmp_path, capsys):
 def test_path_names():
     from sixdpose.errors import OutputError
     from sixdpose.fileio import check_path_name
-
     from sixdpose.segmentation.config import profile_config
 
     with pytest.raises(ConfigError, match="train_split"):

@@ -74,7 +74,10 @@ def _cmd_predict(args) -> int:
     from ..fileio import atomic_write_text, claim_output_file
     from .infer import predict_dataset
 
+    from .infer import check_inference_overrides
+
     setup_logging(args.verbose)
+    overrides = check_inference_overrides(parse_overrides(args.overrides))  # a bad --set fails before any work
     out = Path(args.out)
     claim_output_file(out, RESULTS_HEADER)  # refuse a foreign file before any work
     if args.threads:
@@ -83,7 +86,8 @@ def _cmd_predict(args) -> int:
         torch.set_num_threads(args.threads)
     rows, est = predict_dataset(args.data, args.pose, refiner=args.refiner, masks=args.masks, iterations=args.iterations,
                                 icp=args.icp, colour_verify=args.colour_verify, device=args.device, split=args.split,
-                                limit=args.limit, score_thresh=args.score_thresh, progress=not args.no_progress)
+                                limit=args.limit, score_thresh=args.score_thresh, progress=not args.no_progress,
+                                overrides=overrides)
     write_results(rows, out)
     settings = dict(est.settings(), data=str(args.data), masks=args.masks, split=args.split, limit=args.limit)
     atomic_write_text(out.with_name(out.stem + ".config.yml"), yaml.safe_dump(settings, sort_keys=True))
@@ -195,6 +199,7 @@ def register(subparsers) -> None:
     O.add(p, "--device")
     O.add(p, "--no-progress")
     O.add(p, "--verbose", help="log every score-0 row's reason")
+    add_set_option(p)
     p.set_defaults(func=_cmd_predict)
 
     from .ablation import VARIANTS
