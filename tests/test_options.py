@@ -460,3 +460,19 @@ def test_path_names():
     for bad in ("", ".", "..", "a/b", "../a", "/abs", "a\\b", " a", "a\0b"):
         with pytest.raises(OutputError):
             check_path_name(bad)
+
+
+def test_predict_pose_set_reaches_the_estimator(tmp_path):
+    """A valid ``predict-pose --set num_points=N`` is used (and recorded in <out>.config.yml)."""
+    import yaml
+
+    from sixdpose.pose.config import profile_config
+    from test_pose import fake_pose_run, write_pose_dataset
+
+    ds = write_pose_dataset(tmp_path / "ds", n_images=1)
+    run = fake_pose_run(tmp_path / "run", profile_config("smoke"))
+    out = tmp_path / "r.csv"
+    assert main(["predict-pose", "--data", str(ds), "--pose", str(run), "--out", str(out), "--no-progress",
+                 "--device", "cpu", "--set", "num_points=48"]) == 0
+    settings = yaml.safe_load(out.with_name("r.config.yml").read_text())
+    assert settings["pose_config"]["num_points"] == 48 and profile_config("smoke").num_points != 48
