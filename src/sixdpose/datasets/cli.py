@@ -19,9 +19,11 @@ def register(sub) -> None:
 
 
 def _run(args) -> int:
+    from ..fileio import claim_output_dir
     from .base import open_dataset
     from .bop import export_bop
 
+    claim_output_dir(args.out, "export-bop", create=False)  # refuse an unusable --out before reading the dataset
     ds = open_dataset(args.data)
     out = export_bop(ds, args.out, split=args.split, depth_scale=args.depth_scale, progress=not args.no_progress)
     print(f"exported {len(ds)} images to {out}")
