@@ -30,7 +30,7 @@ import argparse
 import dataclasses
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from .errors import OutputError
@@ -182,7 +182,6 @@ class Opt:
     required: bool = False
     aliases: tuple[str, ...] = ()
     short: str | None = None
-    extra: dict = field(default_factory=dict)
 
 
 #: Upper bounds of sizes given on the command line.
