@@ -89,7 +89,7 @@ def _cmd_eval(args) -> int:
 
     setup_logging(args.verbose)
     check_output_location(args.figures)  # a file or an unwritable place fails before any work
-    m = evaluate(args.data, args.masks, args.figures, tag=args.tag)
+    m = evaluate(args.data, args.masks, args.figures, tag=args.tag, progress=not args.no_progress)
     mk, bx = m["overall"]["mask"], m["overall"]["box"]
     print(
         f"{m['n_images']} image(s), {m['n_gt']} instance(s): mask AP {mk['AP']:.3f} AP50 {mk['AP50']:.3f} "
@@ -165,6 +165,7 @@ def register(subparsers) -> None:
     O.add(p, "--masks", required=True, help="prediction directory of `sixdpose segment`")
     p.add_argument("--figures", default="figures", help="output directory of the tables (default figures/)")
     p.add_argument("--tag", default="", type=O.Name(allow_empty=True), help="file name suffix, e.g. _smoke")
+    O.add(p, "--no-progress")
     O.add(p, "--verbose")
     p.set_defaults(func=_cmd_eval)
 
