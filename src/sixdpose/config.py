@@ -2,8 +2,12 @@
 profiles, one ``--set key=value`` override mechanism, saved beside every output.
 
 A stage's config is ``@dataclass(frozen=True) class XConfig(Config)``; every field is described in the
-class docstring (a test checks it). Construction runs :meth:`Config.validate`, so an invalid config
-never exists: bad values raise :class:`~sixdpose.errors.ConfigError` naming the field.
+class docstring (a test checks it). Construction checks every field against its type hint (an int
+field refuses 2.5 and "fast", a float field refuses NaN, infinities and strings; bools, tuples,
+Optional and nested configs alike) and against the bounds declared with :func:`bounded` (field
+metadata ``min`` / ``max``), then runs :meth:`Config.validate`, so an invalid config never exists,
+whether built by ``--set``, a profile or code: bad values raise :class:`~sixdpose.errors.ConfigError`
+naming the field, the value and what is allowed.
 
 Overrides are ``key=value`` strings (``value`` parsed as YAML: ``3``, ``0.5``, ``true``, ``[1, 2]``,
 ``null``); nested configs take dotted keys (``camera.fov_y_deg=60``). Every subcommand that has a config
