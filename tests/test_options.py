@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import os
 import re
 import typing
@@ -482,3 +483,32 @@ def test_predict_pose_set_reaches_the_estimator(tmp_path):
                  "--device", "cpu", "--set", "num_points=48"]) == 0
     settings = yaml.safe_load(out.with_name("r.config.yml").read_text())
     assert settings["pose_config"]["num_points"] == 48 and profile_config("smoke").num_points != 48
+
+
+def test_option_types_accept_only_what_they_describe():
+    """Any text: an option type returns a value within its range or raises ArgumentTypeError, never anything else."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    types = [O.Int(0, None), O.Int(1, 10_000), O.Float(0.0, 1.0), O.Float(0.0, 10.0, lo_open=True), O.Float(),
+             O.Name(), O.Name(allow_empty=True)]
+    texts = st.one_of(st.text(max_size=12), st.integers().map(str), st.floats(allow_nan=True).map(repr),
+                      st.sampled_from(["nan", "-inf", "1e999", "0", "-0.0", "..", "a/b", " 3 "]))
+
+    @settings(max_examples=300, deadline=None)
+    @given(st.sampled_from(types), texts)
+    def check(t, text):
+        try:
+            v = t(text)
+        except argparse.ArgumentTypeError as e:
+            assert str(e) and "\n" not in str(e)
+            return
+        if isinstance(t, O.Int):
+            assert isinstance(v, int) and (t.lo is None or v >= t.lo) and (t.hi is None or v <= t.hi)
+        elif isinstance(t, O.Float):
+            assert math.isfinite(v) and (t.lo is None or v > t.lo or (v == t.lo and not t.lo_open))
+            assert t.hi is None or v <= t.hi
+        else:
+            assert "/" not in v and v not in (".", "..")
+
+    check()
