@@ -170,10 +170,11 @@ def test_kill_and_resume(tiny_dataset, tmp_path, ycb_dir):
 @pytest.mark.parametrize(
     "extra, message",
     [
-        (["--views", "0"], "--views must be >= 1"),
-        (["--scenes", "-2"], "--scenes must be >= 0"),
-        (["--workers", "0"], "--workers must be >= 1"),
-        (["--seed", "-1"], "--seed must be >= 0"),
+        (["--views", "0"], "argument --views: 0 is out of range: expected an integer in [1, "),
+        (["--scenes", "-2"], "argument --scenes: -2 is out of range: expected an integer in [0, "),
+        (["--workers", "0"], "argument --workers: 0 is out of range: expected an integer in [1, "),
+        (["--seed", "-1"], "argument --seed: -1 is out of range: expected an integer in [0, "),
+        (["--set", "views=2.5"], "views=2.5 is not allowed: expected an integer"),
         (["--assets", "/nonexistent/ycb"], "YCB asset directory not found"),
         (["--scenes", "x"], "expected an integer"),
     ],

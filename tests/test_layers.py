@@ -29,7 +29,8 @@ PKG = SRC / "sixdpose"
 #: stage's ``<stage>.cli``) belongs to the top layer.
 LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("base", ("sixdpose", "sixdpose.errors", "sixdpose.constants", "sixdpose.fileio", "sixdpose.config",
-              "sixdpose.logs", "sixdpose.runs", "sixdpose.geometry", "sixdpose.registry", "sixdpose.schemas")),
+              "sixdpose.logs", "sixdpose.runs", "sixdpose.geometry", "sixdpose.registry", "sixdpose.schemas",
+              "sixdpose.options")),
     ("readers", ("sixdpose.datasets", "sixdpose.assets", "sixdpose.artifacts")),
     ("scoring", ("sixdpose.evaluation",)),
     ("stages", ("sixdpose.generation", "sixdpose.segmentation", "sixdpose.registration", "sixdpose.pose",

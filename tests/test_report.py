@@ -198,7 +198,7 @@ def test_evaluate_curve_limit_and_fig7(tmp_path, capsys):
     e = report.load_entries(tmp_path / "results")[("test", "gt", "learned_it2")]
     assert e.figure("n_gt") == 2 and e.result.config["limit"] == 1 and e.curve[1][-1] == 100.0
     assert main(base + ["--limit", "-1", "--out", str(tmp_path / "ev2")]) == 2
-    assert "--limit: expected N >= 0" in capsys.readouterr().err
+    assert "argument --limit: -1 is out of range: expected an integer >= 0" in capsys.readouterr().err
     fig, why = report.fig7(e, root="/")
     assert why is None and fig is not None and math.isfinite(e.figure("accuracy"))
 

@@ -46,9 +46,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point: parse ``argv`` and run the chosen subcommand; returns the exit status."""
+    """Entry point: parse ``argv`` and run the chosen subcommand; returns the exit status (2 for a bad
+    argument, found while parsing by the option layer, :mod:`sixdpose.options`, or by the command)."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # a usage error (one line on stderr, see _Parser), --help or --version
+        return e.code if isinstance(e.code, int) else 2
     # the command line as typed, for the provenance of result artifacts (sixdpose.artifacts.results)
     args.command_line = ["sixdpose", *(sys.argv[1:] if argv is None else argv)]
     if not getattr(args, "func", None):

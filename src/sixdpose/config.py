@@ -2,8 +2,12 @@
 profiles, one ``--set key=value`` override mechanism, saved beside every output.
 
 A stage's config is ``@dataclass(frozen=True) class XConfig(Config)``; every field is described in the
-class docstring (a test checks it). Construction runs :meth:`Config.validate`, so an invalid config
-never exists: bad values raise :class:`~sixdpose.errors.ConfigError` naming the field.
+class docstring (a test checks it). Construction checks every field against its type hint (an int
+field refuses 2.5 and "fast", a float field refuses NaN, infinities and strings; bools, tuples,
+Optional and nested configs alike) and against the bounds declared with :func:`bounded` (field
+metadata ``min`` / ``max``), then runs :meth:`Config.validate`, so an invalid config never exists,
+whether built by ``--set``, a profile or code: bad values raise :class:`~sixdpose.errors.ConfigError`
+naming the field, the value and what is allowed.
 
 Overrides are ``key=value`` strings (``value`` parsed as YAML: ``3``, ``0.5``, ``true``, ``[1, 2]``,
 ``null``); nested configs take dotted keys (``camera.fov_y_deg=60``). Every subcommand that has a config
@@ -15,15 +19,18 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
+import numbers
 import re
+import types
 import typing
 from pathlib import Path
 from typing import Any, TypeVar
 
 import yaml
 
-from .errors import ConfigError
-from .fileio import atomic_write_text
+from .errors import ConfigError, OutputError
+from .fileio import atomic_write_text, check_path_name
 
 C = TypeVar("C", bound="Config")
 
@@ -53,6 +60,128 @@ def _plain(x):
     return x
 
 
+def bounded(default, *, min=None, max=None, min_open: bool = False, max_open: bool = False):  # noqa: A002
+    """A dataclass field with declared bounds: ``min``/``max`` (inclusive unless ``min_open``/``max_open``)
+    for a number, or for each element of a tuple of numbers. Checked by every :class:`Config` on
+    construction (so ``--set``, profiles and configs built in code alike) and used by the command line's
+    flags for the same field (:func:`sixdpose.options.field_type`)."""
+    md = {k: v for k, v in (("min", min), ("max", max)) if v is not None}
+    md.update({k: True for k, v in (("min_open", min_open), ("max_open", max_open)) if v})
+    return dataclasses.field(default=default, metadata=md)
+
+
+def path_name(default: str):
+    """A dataclass string field whose value becomes one component of a path (a split folder): checked
+    on construction like the command line's names (:func:`sixdpose.fileio.check_path_name`)."""
+    return dataclasses.field(default=default, metadata={"path_name": True})
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, numbers.Integral) and not isinstance(v, bool)
+
+
+def _is_real(v) -> bool:
+    return isinstance(v, numbers.Real) and not isinstance(v, bool)
+
+
+def _describe(hint) -> str:
+    """What a type hint allows, in words."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        opts = [_describe(a) for a in args if a is not type(None)]
+        return " or ".join(opts) + (" or null" if type(None) in args else "")
+    if origin is tuple:
+        if len(args) == 2 and args[1] is Ellipsis:
+            return f"a list of {_describe(args[0])}s"
+        return f"a list of {len(args)} ({', '.join(_describe(a) for a in args)})"
+    return {int: "an integer", float: "a finite number", bool: "true or false", str: "a string"}.get(
+        hint, f"a {getattr(hint, '__name__', hint)}")
+
+
+def _fits(hint, v, in_tuple: bool = False) -> bool:
+    """Whether value ``v`` has the type ``hint`` (int, float, bool, str, tuples, Optional, nested configs)."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return any(v is None if a is type(None) else _fits(a, v, in_tuple) for a in args)
+    if origin is tuple:
+        if not isinstance(v, (list, tuple)):
+            # a lone name where a tuple of names is expected is one name (validate wraps it)
+            return args[-1] is Ellipsis and args[0] is str and (isinstance(v, str) or _is_int(v))
+        if len(args) == 2 and args[1] is Ellipsis:
+            return all(_fits(args[0], x, True) for x in v)
+        return len(v) == len(args) and all(_fits(a, x, True) for a, x in zip(args, v, strict=True))
+    if hint is bool:
+        return isinstance(v, bool)
+    if hint is int:
+        return _is_int(v)
+    if hint is float:
+        return _is_real(v) and math.isfinite(float(v))
+    if hint is str:
+        return isinstance(v, str) or (in_tuple and _is_int(v))  # obj_ids as names (validate converts)
+    if isinstance(hint, type):
+        return isinstance(v, hint)
+    return True
+
+
+def _num(x) -> str:
+    """A bound as written: 10000, not 1e+04."""
+    return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f"{x:g}"
+
+
+def bounds_text(md) -> str:
+    """Declared bounds in words (`` in [1, 10000]``, `` >= 0``) from field metadata (:func:`bounded`)."""
+    lo, hi = md.get("min"), md.get("max")
+    if lo is not None and hi is not None:
+        return f" in {'(' if md.get('min_open') else '['}{_num(lo)}, {_num(hi)}{')' if md.get('max_open') else ']'}"
+    if lo is not None:
+        return f" {'>' if md.get('min_open') else '>='} {_num(lo)}"
+    if hi is not None:
+        return f" {'<' if md.get('max_open') else '<='} {_num(hi)}"
+    return ""
+
+
+def _in_bounds(md, v) -> bool:
+    if isinstance(v, (list, tuple)):
+        return all(_in_bounds(md, x) for x in v)
+    if not _is_real(v):
+        return True
+    lo, hi = md.get("min"), md.get("max")
+    if lo is not None and (v < lo or (md.get("min_open") and v == lo)):
+        return False
+    return not (hi is not None and (v > hi or (md.get("max_open") and v == hi)))
+
+
+def field_metadata(cls, name: str):
+    """The declared metadata of dataclass field ``name`` of ``cls`` (bounds of :func:`bounded`,
+    :func:`path_name`): its own, else that of the nearest base class declaring it (a subclass that only
+    changes a field's default keeps the base's bounds)."""
+    for klass in cls.__mro__:
+        f = klass.__dict__.get("__dataclass_fields__", {}).get(name)
+        if f is not None and f.metadata:
+            return f.metadata
+    return {}
+
+
+def check_fields(cfg) -> None:
+    """Check every field of dataclass ``cfg`` against its type hint and its declared bounds
+    (:func:`bounded`); raises :class:`ConfigError` naming the field, the value and what is allowed."""
+    cls = type(cfg)
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cfg):
+        v, hint, md = getattr(cfg, f.name), hints.get(f.name), field_metadata(cls, f.name)
+        if hint is not None and not _fits(hint, v):
+            raise ConfigError(f"{cls.__name__}: {f.name}={v!r} is not allowed: expected {_describe(hint)}"
+                              f"{bounds_text(md)}")
+        if md.get("path_name") and isinstance(v, str):
+            try:
+                check_path_name(v, f"{cls.__name__}: {f.name}")
+            except OutputError as e:
+                raise ConfigError(str(e)) from None
+        if md and not _in_bounds(md, v):
+            raise ConfigError(f"{cls.__name__}: {f.name}={v!r} is out of range: expected {_describe(hint)}"
+                              f"{bounds_text(md)}")
+
+
 class Config:
     """Base of the frozen dataclass configs (see the module docstring)."""
 
@@ -62,6 +191,7 @@ class Config:
             v = getattr(self, f.name)
             if isinstance(v, list) and "tuple" in str(hints.get(f.name, "")):
                 object.__setattr__(self, f.name, tuple(v))
+        check_fields(self)  # types and declared bounds first: validate() may compare values
         try:
             self.validate()
         except ConfigError:
@@ -70,7 +200,8 @@ class Config:
             raise ConfigError(f"{type(self).__name__}: {e}") from None
 
     def validate(self) -> None:
-        """Raise ``ValueError`` (or :class:`ConfigError`) naming the first invalid field; run on construction."""
+        """Raise ``ValueError`` (or :class:`ConfigError`) naming the first invalid field; run on construction,
+        after every field was checked against its type hint and declared bounds (:func:`check_fields`)."""
 
     # -- (de)serialisation -------------------------------------------------------------------
     def to_dict(self) -> dict:

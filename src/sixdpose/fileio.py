@@ -93,10 +93,46 @@ def atomic_write_json(path: str | os.PathLike, obj, indent: int | None = 1, sort
 
 def _check_writable(path: Path) -> None:
     parent = path if path.is_dir() else path.parent
-    while not parent.exists():
+    while not parent.exists() and parent != parent.parent:
         parent = parent.parent
+    if not parent.is_dir():
+        raise OutputError(f"{path}: cannot create it: {parent} is a file, not a directory")
     if not os.access(parent, os.W_OK):
         raise OutputError(f"{path}: cannot write here (no write permission in {parent})")
+
+
+def check_output_location(path: str | os.PathLike, directory: bool = True) -> Path:
+    """Check, before any work, that ``path`` can be created or written: for a directory (``directory``)
+    it is not an existing file; no ancestor is a regular file; the nearest existing directory is writable.
+    Nothing is created. Use it for shared output directories (``--figures``, ``--results-dir``) that
+    several commands write into, where :func:`claim_output_dir`'s ownership rule does not apply.
+
+    Raises:
+        OutputError: one line naming the path and the reason.
+    """
+    path = Path(path)
+    if directory and path.exists() and not path.is_dir():
+        raise OutputError(f"{path}: exists and is not a directory")
+    if not directory and path.is_dir():
+        raise OutputError(f"{path}: is a directory; expected a file name")
+    if path.is_dir() and not os.access(path, os.W_OK):
+        raise OutputError(f"{path}: directory is not writable")
+    _check_writable(path)
+    return path
+
+
+def check_path_name(name: str, what: str = "name") -> str:
+    """Check that ``name`` (a split, a tag, a result or run name) is one plain path component: not
+    empty, no ``/`` or ``\\``, not ``.`` or ``..``, no NUL, not absolute. Returns ``name``.
+
+    Raises:
+        OutputError: one line naming ``what`` and the value.
+    """
+    if (not isinstance(name, str) or not name or name in (".", "..") or "/" in name or "\\" in name
+            or "\0" in name or os.path.isabs(name) or name != name.strip()):
+        raise OutputError(f"{what} {name!r}: expected a plain name (one path component: no '/', '\\', "
+                          "'..', leading or trailing space, or absolute path)")
+    return name
 
 
 def claim_output_dir(path: str | os.PathLike, kind: str, marker: str | tuple[str, ...] = (),

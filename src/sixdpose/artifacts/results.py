@@ -435,7 +435,10 @@ def add_result_arguments(parser, default_name: str | None, default_dir: str | Pa
     g.add_argument("--results-dir", default=str(default_dir),
                    help=f"write the figures, with commit, date, hardware and command line, to DIR/NAME.json (+ .csv) "
                         f"(default: {default_dir})")
-    g.add_argument("--result-name", default=default_name, help=f"result name (default: {name_help or default_name})")
+    from ..options import Name
+
+    g.add_argument("--result-name", default=default_name, type=Name(),
+                   help=f"result name (default: {name_help or default_name})")
     g.add_argument("--no-result", action="store_true", help="only print the figures; write no result file")
 
 

@@ -87,16 +87,3 @@ def dataset_fingerprint(reader: DatasetReader) -> str | None:
         h.update((reader.root / layout.GT_FILE).read_bytes())
         return h.hexdigest()
     return None
-
-
-def as_reader(data: "str | Path | DatasetReader", split: str = "test", **kwargs) -> DatasetReader:
-    """``data`` itself if it is already a :class:`DatasetReader`, else :func:`open_dataset` of the path.
-
-    Every stage entry point accepts a reader or a path through this function, so a dataset is opened
-    once and a caller can hand in a reader of its own (for example one that alters images).
-    """
-    if isinstance(data, DatasetReader):
-        if kwargs:
-            raise TypeError(f"reader options {sorted(kwargs)} apply only when a path is given")
-        return data
-    return open_dataset(data, split=split, **kwargs)

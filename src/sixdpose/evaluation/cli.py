@@ -4,38 +4,38 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..constants import ADD_THRESHOLD, MIN_VISIBLE_PX
+from .. import options as O
+from ..constants import ADD_THRESHOLD
 
 
 def register(sub) -> None:
     """Add the ``evaluate`` subcommand."""
     p = sub.add_parser("evaluate", help="ADD(-S), BOP average recall, ADD-S AUC and FPS of a BOP results CSV",
                        description="Score a results CSV against the dataset's ground truth (paper section V-A).")
-    p.add_argument("--data", required=True, help="dataset directory (synthetic layout or BOP root)")
+    O.add(p, "--data")
     p.add_argument("--results", required=True, help="BOP results CSV (from `sixdpose register`)")
-    p.add_argument("--split", default="test", help="BOP split (ignored for the synthetic layout)")
-    p.add_argument("--out", default=None, help="output directory (default: next to the results, <results>_eval)")
-    p.add_argument("--min-px", type=int, default=MIN_VISIBLE_PX,
-                   help="count GT instances with at least this many visible pixels")
-    p.add_argument("--threshold", type=float, default=ADD_THRESHOLD, help="correct if ADD(-S) < threshold x diameter")
+    O.add(p, "--split")
+    O.add(p, "--out")
+    O.add(p, "--min-px")
+    p.add_argument("--threshold", type=O.Float(0.0, 10.0, lo_open=True), default=ADD_THRESHOLD,
+                   help="correct if ADD(-S) < threshold x diameter")
     p.add_argument("--symmetric-ids", default=None,
                    help="BOP only: comma-separated obj_ids to treat as symmetric (overrides models_info.json)")
     p.add_argument("--all-images", action="store_true",
                    help="evaluate every image of the split (default: the images in the results); use it with "
                         "predicted masks, where images without detections have no rows")
-    p.add_argument("--limit", type=int, default=0,
-                   help="evaluate the first N images of the split, with or without rows (as register / predict-pose "
-                        "--limit N ran them; 0: all)")
+    O.add(p, "--limit", help="evaluate the first N images of the split, with or without rows (as register / "
+                             "predict-pose --limit N ran them; 0: all)")
     p.add_argument("--label", default=None, help="method label for the tables (default: results file stem)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    O.add(p, "--no-progress")
     p.add_argument("--no-bop", action="store_true",
                    help="skip the BOP 2019 scores (AR_VSD, AR_MSSD, AR_MSPD, AR) and the ADD-S AUC")
     g = p.add_argument_group("result artifact")
-    g.add_argument("--result-name", default=None, metavar="NAME",
-                   help="also write the summary and the per-object table, with commit, date, hardware and this "
-                        "command line, as the result artifact RESULTS_DIR/NAME.json (+ .csv); README tables are "
-                        "generated from these (python -m sixdpose.reporting.readme)")
-    g.add_argument("--results-dir", default="results", help="directory of result artifacts (default: results)")
+    O.add(p, "--result-name", group=g,
+          help="also write the summary and the per-object table, with commit, date, hardware and this command line, "
+               "as the result artifact RESULTS_DIR/NAME.json (+ .csv); README tables are generated from these "
+               "(python -m sixdpose.reporting.readme)")
+    O.add(p, "--results-dir", group=g)
     p.set_defaults(func=_run)
 
 
@@ -50,8 +50,10 @@ def _run(args) -> int:
     claim_output_dir(out, "evaluate", create=False)  # refuse a foreign directory before any work
     if args.result_name is not None:
         from ..artifacts.results import result_path
+        from ..fileio import check_output_location
 
-        result_path(args.result_name, args.results_dir)  # a bad name fails before any work
+        # a bad name, or a results dir that is a file or not writable, fails before any work
+        check_output_location(result_path(args.result_name, args.results_dir), directory=False)
     ests = read_results(res_path)
     kw = {}
     if args.symmetric_ids:
@@ -62,10 +64,6 @@ def _run(args) -> int:
         except ValueError:
             raise UserError(f"--symmetric-ids: expected comma-separated integers, got {args.symmetric_ids!r}") from None
     ds = open_dataset(args.data, split=args.split, **kw)
-    if args.limit < 0:
-        from ..errors import UserError
-
-        raise UserError(f"--limit: expected N >= 0 images, got {args.limit}")
     images = ds.keys()[: args.limit] if args.limit else (ds.keys() if args.all_images else None)
     res = evaluate(ds, ests, min_px=args.min_px, threshold=args.threshold, progress=not args.no_progress, images=images,
                    bop=not args.no_bop)

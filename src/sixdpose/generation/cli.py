@@ -2,19 +2,12 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 
+from .. import options as O
 from ..config import add_set_option, from_profile, parse_overrides
-from .config import PROFILES
-
-
-def _nonneg_int(s: str) -> int:
-    try:
-        return int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {s!r}") from None
+from .config import PROFILES, GenerationConfig
 
 
 def _names(text: str) -> list[str]:
@@ -35,12 +28,14 @@ def register(sub) -> None:
         "--profile ycbv (YCB-Video: 19 textured ycbv models, YCB noise, YCB-Video camera, kinect depth, BOP copy "
         "in OUT/bop). Everything lands in the dataset's config.yml.",
     )
-    p.add_argument("--out", required=True, help="output dataset directory")
-    p.add_argument("--scenes", type=_nonneg_int, default=None, help="number of scenes (default: the profile's)")
-    p.add_argument("--views", type=_nonneg_int, default=None, help="views per scene (default 20)")
-    p.add_argument("--seed", type=_nonneg_int, default=None, help="random seed (default: the profile's; 0 for smoke, demo, paper)")
-    p.add_argument("--profile", default="demo", choices=sorted(PROFILES), help="named config profile (default demo)")
-    p.add_argument("--workers", type=_nonneg_int, default=1, help="parallel scene workers (default 1)")
+    O.add(p, "--out", help="output dataset directory")
+    p.add_argument("--scenes", type=O.field_type(GenerationConfig, "scenes"), default=None,
+                   help="number of scenes (default: the profile's)")
+    p.add_argument("--views", type=O.field_type(GenerationConfig, "views"), default=None,
+                   help="views per scene (default 20)")
+    O.add(p, "--seed", help="random seed (default: the profile's; 0 for smoke, demo, paper)")
+    O.add_profile(p, sorted(PROFILES), help="named config profile (default demo)")
+    O.add(p, "--workers")
     p.add_argument("--assets", default=None, help="YCB asset directory (default: $SIXDPOSE_YCB)")
     p.add_argument("--targets", default=None, metavar="A,B,...",
                    help="comma-separated target objects (sets target_objects): YCB names, or with --assets-bop "
@@ -59,7 +54,7 @@ def register(sub) -> None:
                    help="cache of converted BOP models (default $SIXDPOSE_CACHE/bop_models or ~/.cache/sixdpose/bop_models)")
     p.add_argument("--executor", default="local", choices=["local", "ray"], help="local processes or a Ray cluster")
     p.add_argument("--address", default=None, help="Ray cluster address (default: start a local instance)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    O.add(p, "--no-progress")
     add_set_option(p)
     p.set_defaults(func=_run)
 

@@ -9,7 +9,7 @@ import re
 from dataclasses import dataclass, field
 
 from ..assets.bop import BOP_YCB_MAPS, bop_name
-from ..config import Config, from_profile
+from ..config import Config, bounded, from_profile
 from .sensors import SENSORS
 
 #: Values of ``GenerationConfig.target_source``.
@@ -41,17 +41,17 @@ class CameraConfig(Config):
         near, far: depth range in metres; nearer or farther pixels have no measurement (0.0).
     """
 
-    width: int = 640
-    height: int = 480
-    fov_y_deg: float = 45.0
+    width: int = bounded(640, min=8, max=8192)
+    height: int = bounded(480, min=8, max=8192)
+    fov_y_deg: float = bounded(45.0, min=0, max=180, min_open=True, max_open=True)
     intrinsics: tuple[float, float, float, float] | None = None
-    distance_range: tuple[float, float] = (0.55, 1.3)
-    height_range: tuple[float, float] = (0.25, 1.1)
-    arc_span_deg: tuple[float, float] = (45.0, 180.0)
-    roll_deg: tuple[float, float] = (-30.0, 30.0)
-    target_jitter: tuple[float, float] = (0.25, 0.2)
-    near: float = 0.05
-    far: float = 8.0
+    distance_range: tuple[float, float] = bounded((0.55, 1.3), min=0, max=100, min_open=True)
+    height_range: tuple[float, float] = bounded((0.25, 1.1), min=-10, max=100)
+    arc_span_deg: tuple[float, float] = bounded((45.0, 180.0), min=0, max=360)
+    roll_deg: tuple[float, float] = bounded((-30.0, 30.0), min=-180, max=180)
+    target_jitter: tuple[float, float] = bounded((0.25, 0.2), min=0, max=10)
+    near: float = bounded(0.05, min=0, max=1000, min_open=True)
+    far: float = bounded(8.0, min=0, max=10000, min_open=True)
 
     def validate(self) -> None:
         """Raise ``ValueError`` with a one-line message if any value is out of range."""
@@ -125,23 +125,23 @@ class GenerationConfig(Config):
         camera: the :class:`CameraConfig`.
     """
 
-    scenes: int = 10
-    views: int = 20
-    seed: int = 0
-    targets: tuple[int, int] = (5, 20)
-    noise: tuple[int, int] = (5, 10)
-    max_instances: int = 4
-    off_table_prob: float = 0.1
-    table_size: tuple[float, float] = (1.2, 0.8)
-    table_height: float = 0.75
-    time_step: float = 5e-3
-    sim_time: float = 5.0
-    rest_speed: float = 0.02
-    contact_points_per_edge: int = 3
-    table_edge_spacing: float = 0.05
-    scene_radius: float = 3.0
-    max_attempts: int = 6
-    model_points: int = 20000
+    scenes: int = bounded(10, min=0, max=100_000)
+    views: int = bounded(20, min=1, max=10_000)
+    seed: int = bounded(0, min=0, max=2**32 - 1)
+    targets: tuple[int, int] = bounded((5, 20), min=0, max=200)
+    noise: tuple[int, int] = bounded((5, 10), min=0, max=200)
+    max_instances: int = bounded(4, min=1, max=100)
+    off_table_prob: float = bounded(0.1, min=0, max=1)
+    table_size: tuple[float, float] = bounded((1.2, 0.8), min=0, max=10, min_open=True)
+    table_height: float = bounded(0.75, min=0, max=10)
+    time_step: float = bounded(5e-3, min=0, max=1, min_open=True)
+    sim_time: float = bounded(5.0, min=0, max=600, min_open=True)
+    rest_speed: float = bounded(0.02, min=0, max=10, min_open=True)
+    contact_points_per_edge: int = bounded(3, min=1, max=100)
+    table_edge_spacing: float = bounded(0.05, min=0, max=1, min_open=True)
+    scene_radius: float = bounded(3.0, min=0, max=100, min_open=True)
+    max_attempts: int = bounded(6, min=1, max=1000)
+    model_points: int = bounded(20000, min=1, max=1_000_000)
     sensor: str = "ideal"
     target_source: str = "ycb"
     target_objects: tuple[str, ...] | None = None

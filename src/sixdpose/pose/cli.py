@@ -9,10 +9,10 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from .. import options as O
 from ..config import add_set_option, parse_overrides
-from ..constants import MIN_DETECTION_SCORE, MIN_VISIBLE_PX
 from ..logs import setup_logging
-from ..registry import STAGE_PROFILES
+from .config import PROFILES, REFINER_PROFILES, RefinerConfig
 
 
 def _overrides(args) -> dict:
@@ -34,22 +34,35 @@ def _report(s: dict) -> None:
               f"{s['first_loss']:.4f} -> {s['last_loss']:.4f} m{extra}, {s['seconds']:.0f} s; run in {s['run_dir']}")
 
 
+def _precheck(args, pfn) -> dict:
+    """The overrides, checked against the profile's config before anything is read or written (a bad
+    ``--set`` leaves no half-made run directory); on ``--resume`` the run's own config is checked by training."""
+    ov = _overrides(args)
+    if not args.resume:
+        pfn(args.profile or "smoke", ov)
+    return ov
+
+
 def _cmd_train_pose(args) -> int:
+    from .config import profile_config
     from .train import train_pose
 
     setup_logging(args.verbose)
+    ov = _precheck(args, profile_config)
     s = train_pose(args.data, args.out, profile=args.profile, resume=args.resume, masks=args.masks, val=args.val,
-                   device=args.device, progress=not args.no_progress, **_overrides(args))
+                   device=args.device, progress=not args.no_progress, **ov)
     _report(s)
     return 0
 
 
 def _cmd_train_refiner(args) -> int:
+    from .config import refiner_profile_config
     from .train import train_refiner
 
     setup_logging(args.verbose)
+    ov = _precheck(args, refiner_profile_config)
     s = train_refiner(args.pose, args.data, args.out, profile=args.profile, resume=args.resume, val=args.val,
-                      device=args.device, progress=not args.no_progress, **_overrides(args))
+                      device=args.device, progress=not args.no_progress, **ov)
     _report(s)
     return 0
 
@@ -61,7 +74,10 @@ def _cmd_predict(args) -> int:
     from ..fileio import atomic_write_text, claim_output_file
     from .infer import predict_dataset
 
+    from .infer import check_inference_overrides
+
     setup_logging(args.verbose)
+    overrides = check_inference_overrides(parse_overrides(args.overrides))  # a bad --set fails before any work
     out = Path(args.out)
     claim_output_file(out, RESULTS_HEADER)  # refuse a foreign file before any work
     if args.threads:
@@ -70,7 +86,8 @@ def _cmd_predict(args) -> int:
         torch.set_num_threads(args.threads)
     rows, est = predict_dataset(args.data, args.pose, refiner=args.refiner, masks=args.masks, iterations=args.iterations,
                                 icp=args.icp, colour_verify=args.colour_verify, device=args.device, split=args.split,
-                                limit=args.limit, score_thresh=args.score_thresh, progress=not args.no_progress)
+                                limit=args.limit, score_thresh=args.score_thresh, progress=not args.no_progress,
+                                overrides=overrides)
     write_results(rows, out)
     settings = dict(est.settings(), data=str(args.data), masks=args.masks, split=args.split, limit=args.limit)
     atomic_write_text(out.with_name(out.stem + ".config.yml"), yaml.safe_dump(settings, sort_keys=True))
@@ -99,19 +116,28 @@ def _cmd_ablation(args) -> int:
         picked = names
     if (args.epochs is None) == (args.time_budget is None):
         raise ConfigError("give the budget of every variant: --epochs N (equal steps) or --time-budget SECONDS (equal time)")
-    claim_output_dir(args.out, "pose-ablation")  # refuse a foreign directory before any work
     budget = {"epochs": args.epochs, "time_budget": 0.0} if args.epochs is not None else {"time_budget": args.time_budget}
     overrides = parse_overrides(args.overrides)
-    table = run_ablation(args.train, args.val, args.out, profile=args.profile, variants={n: VARIANTS[n] for n in picked},
-                         min_px=args.min_px, val_images=args.val_images, progress=not args.no_progress,
+    from .config import profile_config
+
+    profile_config(args.profile, {**overrides, **budget})  # a bad --set fails before anything is written
+    result_name = args.result_name or f"pose_ablation_{args.profile}"
+    if not args.no_result:
+        from ..artifacts.results import result_path
+        from ..fileio import check_output_location
+
+        check_output_location(result_path(result_name, args.results_dir), directory=False)
+    claim_output_dir(args.out, "pose-ablation")  # refuse a foreign directory before any work
+    table = run_ablation(args.data, args.val, args.out, profile=args.profile, variants={n: VARIANTS[n] for n in picked},
+                         min_px=args.min_px, val_images=args.limit, progress=not args.no_progress,
                          **budget, **overrides)
     out = Path(args.out)
     write_table(table, list(table.columns), out / "ablation.csv", out / "ablation.tex")
     print(table.to_string(index=False))
     if not args.no_result:
-        path = write_result(args.result_name or f"pose_ablation_{args.profile}", table,
+        path = write_result(result_name, table,
                             units={"train_seconds": "s", "val_add": "%", "n_val": "GT instances"},
-                            description=f"pose ablation: each variant trained on {args.train} ({budget}), ADD(-S) on "
+                            description=f"pose ablation: each variant trained on {args.data} ({budget}), ADD(-S) on "
                                         f"{args.val} (GT masks, >= {args.min_px} visible px)",
                             config={"profile": args.profile, **budget, **overrides},
                             results_dir=args.results_dir)
@@ -120,19 +146,20 @@ def _cmd_ablation(args) -> int:
 
 
 def _train_args(p, refiner: bool) -> None:
-    p.add_argument("--data", required=True, help="training dataset (synthetic layout or BOP root), e.g. data/train")
-    p.add_argument("--out", required=True, help="run directory (config.json, metrics.csv, last.pt, model.pt)")
-    p.add_argument("--profile", choices=STAGE_PROFILES, default=None,
-                   help="named config (default smoke; on --resume: the run's)")
+    O.add(p, "--data", help="training dataset (synthetic layout or BOP root), e.g. data/train")
+    O.add(p, "--out", help="run directory (config.json, metrics.csv, last.pt, model.pt)")
+    O.add_profile(p, REFINER_PROFILES if refiner else PROFILES,
+                  help="named config (default smoke; on --resume: the run's)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its last completed epoch")
-    p.add_argument("--val", default=None, help="validation dataset scored every epoch (ADD(-S) %% into metrics.csv), e.g. data/val")
-    p.add_argument("--epochs", type=int, help="number of epochs (may be raised on --resume)")
-    p.add_argument("--time-budget", dest="time_budget", type=float, help="seconds; once spent (checked every step) the epoch ends early and training stops (0: none)")
-    p.add_argument("--seed", type=int, help="seed of initialisation, shuffling and sampling")
-    p.add_argument("--threads", type=int, help="torch CPU threads per process")
-    p.add_argument("--device", default=None, help="cpu, cuda or auto (default: GPU when present)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("-v", "--verbose", action="store_true", help="log every epoch")
+    O.add(p, "--val")
+    O.add(p, "--epochs", help="number of epochs (may be raised on --resume)")
+    O.add(p, "--time-budget", help="seconds; once spent (checked every step) the epoch ends early and training stops "
+                                   "(0: none)")
+    O.add(p, "--seed", help="seed of initialisation, shuffling and sampling")
+    O.add(p, "--threads")
+    O.add(p, "--device")
+    O.add(p, "--no-progress")
+    O.add(p, "--verbose", help="log every epoch")
     add_set_option(p)
 
 
@@ -143,59 +170,59 @@ def register(subparsers) -> None:
                               "point fusion, attention pooling). Profiles: smoke (CI), cpu (2 h on 2 cores with the "
                               "refiner), paper (GPU). Multi-process: run under torchrun.")
     _train_args(p, False)
-    p.add_argument("--masks", default="gt", help="gt (ground-truth masks) or PRED_DIR of `sixdpose segment`")
+    O.add(p, "--masks")
     p.set_defaults(func=_cmd_train_pose)
 
     p = subparsers.add_parser("train-refiner", help="train the iterative refiner on a trained pose network",
                               description="Train the refiner on the (noised) poses of a finished train-pose run.")
-    p.add_argument("--pose", required=True, help="run directory of train-pose")
+    O.add(p, "--pose")
     _train_args(p, True)
     p.set_defaults(func=_cmd_train_refiner)
 
     p = subparsers.add_parser("predict-pose", help="estimate poses with a trained pose network (BOP results CSV)",
                               description="Estimate the pose of every masked instance; writes a BOP results CSV "
                               "(score-0 rows for unusable instances) and <out stem>.config.yml beside it.")
-    p.add_argument("--data", required=True, help="dataset directory")
-    p.add_argument("--pose", required=True, help="run directory of train-pose")
+    O.add(p, "--data")
+    O.add(p, "--pose")
     p.add_argument("--refiner", default=None, help="run directory of train-refiner")
-    p.add_argument("--iterations", type=int, default=None, help="refinement iterations (default: the refiner's, 2)")
-    p.add_argument("--masks", default="gt", help="gt or PRED_DIR of `sixdpose segment`")
-    p.add_argument("--score-thresh", dest="score_thresh", type=float, default=MIN_DETECTION_SCORE,
-                   help="minimum score of a predicted mask (default %(default)s)")
+    p.add_argument("--iterations", type=O.Int(0, RefinerConfig.__dataclass_fields__["iterations"].metadata["max"]),
+                   default=None, help="refinement iterations (default: the refiner's, 2; 0: none)")
+    O.add(p, "--masks")
+    O.add(p, "--score-thresh")
     p.add_argument("--icp", action="store_true", help="refine every pose with Open3D ICP (the hybrid stage's)")
     p.add_argument("--colour-verify", dest="colour_verify", action="store_true",
                    help="then run the hybrid stage's colour verification")
-    p.add_argument("--split", default="test", help="BOP split (ignored for the synthetic layout)")
-    p.add_argument("--limit", type=int, default=0, help="first N images only (0: all)")
-    p.add_argument("--out", required=True, help="results CSV to write")
-    p.add_argument("--threads", type=int, default=0, help="torch CPU threads")
-    p.add_argument("--device", default=None, help="cpu, cuda or auto")
-    p.add_argument("--no-progress", action="store_true")
-    p.add_argument("-v", "--verbose", action="store_true", help="log every score-0 row's reason")
+    O.add(p, "--split")
+    O.add(p, "--limit")
+    O.add(p, "--out", help="results CSV to write")
+    O.add(p, "--threads")
+    O.add(p, "--device")
+    O.add(p, "--no-progress")
+    O.add(p, "--verbose", help="log every score-0 row's reason")
+    add_set_option(p)
     p.set_defaults(func=_cmd_predict)
 
     from .ablation import VARIANTS
 
     p = subparsers.add_parser("pose-ablation", help="train each option of the paper's architecture alone and score it on val",
                               description="The ablation of section IV-C's choices: each variant (indices: " + "; ".join(
-                                  f"{k} {n}" for k, n in enumerate(VARIANTS)) + ") trained on --train with the same "
+                                  f"{k} {n}" for k, n in enumerate(VARIANTS)) + ") trained on --data with the same "
                               "budget and scored by ADD(-S) on --val (never test). Resumable: finished variants are "
                               "scored, not retrained. Writes OUT/<k>_<variant>/ runs, OUT/ablation.csv/.tex and the "
                               "result artifact RESULTS_DIR/NAME.json.")
-    p.add_argument("--train", required=True, help="training dataset, e.g. data/train")
-    p.add_argument("--val", required=True, help="held-out dataset the variants are scored on, e.g. data/val (never test)")
-    p.add_argument("--out", required=True, help="directory of the variants' runs")
-    p.add_argument("--profile", choices=STAGE_PROFILES, default="cpu", help="base PoseConfig profile")
-    p.add_argument("--epochs", type=int, default=None, help="epochs per variant (equal steps; time budget off)")
-    p.add_argument("--time-budget", dest="time_budget", type=float, default=None, help="seconds of training per variant (equal time)")
+    O.add(p, "--data", help="training dataset, e.g. data/train")
+    O.add(p, "--val", required=True, help="held-out dataset the variants are scored on, e.g. data/val (never test)")
+    O.add(p, "--out", help="directory of the variants' runs")
+    O.add_profile(p, PROFILES, help="base PoseConfig profile")
+    O.add(p, "--epochs", help="epochs per variant (equal steps; time budget off)")
+    O.add(p, "--time-budget", help="seconds of training per variant (equal time)")
     p.add_argument("--variants", default=None, help="comma-separated variant indices (default: all)")
-    p.add_argument("--val-images", dest="val_images", type=int, default=0, help="score on the first N images of --val (0: all)")
-    p.add_argument("--min-px", dest="min_px", type=int, default=MIN_VISIBLE_PX,
-                   help="visible pixels of a scored instance")
-    p.add_argument("--results-dir", default="results", help="directory of the result artifact (default: results)")
-    p.add_argument("--result-name", default=None, help="result name (default: pose_ablation_<profile>)")
+    O.add(p, "--limit")
+    O.add(p, "--min-px")
+    O.add(p, "--results-dir", help="directory of the result artifact (default: results)")
+    O.add(p, "--result-name", help="result name (default: pose_ablation_<profile>)")
     p.add_argument("--no-result", action="store_true", help="write no result artifact")
-    p.add_argument("--no-progress", action="store_true")
-    p.add_argument("-v", "--verbose", action="store_true")
+    O.add(p, "--no-progress")
+    O.add(p, "--verbose")
     add_set_option(p)
     p.set_defaults(func=_cmd_ablation)

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..config import from_profile
+from ..config import bounded, from_profile
 from ..training.schedule import TrainSchedule
 
 TRANSLATIONS = ("absolute", "centroid_offset")
@@ -51,12 +51,12 @@ class FrameSchedule(TrainSchedule):
     Model: width (channel multiplier, > 0).
     """
 
-    width: float = 1.0
-    num_points: int = 500
-    num_model_points: int = 500
-    min_points: int = 10
-    max_images: int = 0
-    repeat: int = 1
+    width: float = bounded(1.0, min=0, max=16, min_open=True)
+    num_points: int = bounded(500, min=1, max=100_000)
+    num_model_points: int = bounded(500, min=1, max=100_000)
+    min_points: int = bounded(10, min=1, max=100_000)
+    max_images: int = bounded(0, min=0, max=100_000_000)
+    repeat: int = bounded(1, min=1, max=10_000)
 
     def validate(self) -> None:
         """Check the schedule and frame fields (ValueError naming the field)."""
@@ -115,17 +115,17 @@ class PoseConfig(FrameSchedule):
     """
 
     profile: str = "paper"
-    emb_dim: int = 32
-    crop: int = 0
-    crop_margin: float = 0.1
+    emb_dim: int = bounded(32, min=1, max=4096)
+    crop: int = bounded(0, min=0, max=4096)
+    crop_margin: float = bounded(0.1, min=0, max=10)
     translation: str = "absolute"
     rotation: str = "quaternion"
     norm: str = "none"
-    rgb_noise: float = 0.3
-    colour_jitter: float = 0.0
-    lr: float = 1e-4
-    warmup_steps: int = 1000
-    lr_step_epochs: int = 5
+    rgb_noise: float = bounded(0.3, min=0, max=1)
+    colour_jitter: float = bounded(0.0, min=0, max=1, max_open=True)
+    lr: float = bounded(1e-4, min=0, max=10, min_open=True)
+    warmup_steps: int = bounded(1000, min=0, max=100_000_000)
+    lr_step_epochs: int = bounded(5, min=1, max=100_000)
 
     def validate(self) -> None:
         """Check every field (ValueError naming the field)."""
@@ -168,9 +168,9 @@ class RefinerConfig(FrameSchedule):
     """
 
     profile: str = "paper"
-    iterations: int = 2
-    noise_rot_deg: float = 15.0
-    noise_trans: float = 0.02
+    iterations: int = bounded(2, min=1, max=100)
+    noise_rot_deg: float = bounded(15.0, min=0, max=180)
+    noise_trans: float = bounded(0.02, min=0, max=10)
 
     def validate(self) -> None:
         """Check every field (ValueError naming the field)."""

@@ -84,6 +84,26 @@ def _orthonormalise(R: np.ndarray) -> np.ndarray:
     return U @ D @ Vt
 
 
+#: Fields of a pose run's :class:`~.config.PoseConfig` that ``predict-pose --set`` may change: they act
+#: on the points sampled per instance at inference, not on the network's shapes.
+INFERENCE_FIELDS = ("num_points", "min_points")
+
+
+def check_inference_overrides(overrides: dict | None) -> dict:
+    """``overrides`` checked before any work: only :data:`INFERENCE_FIELDS`, each of the field's type and
+    bounds. Raises :class:`~sixdpose.errors.ConfigError`."""
+    from ..errors import ConfigError
+
+    overrides = dict(overrides or {})
+    bad = sorted(set(overrides) - set(INFERENCE_FIELDS))
+    if bad:
+        raise ConfigError(f"predict-pose --set: {', '.join(bad)} cannot change at inference (allowed: "
+                          f"{', '.join(INFERENCE_FIELDS)})")
+    if overrides:
+        PoseConfig().replace(**overrides)
+    return overrides
+
+
 class Estimator:
     """Learned 6D pose estimator for one frame at a time (see the module docstring).
 
@@ -95,16 +115,22 @@ class Estimator:
         reader: the dataset reader (its models are needed by ``icp`` / ``colour_verify``).
         score_thresh: predicted masks below this score are ignored. seed: point-sampling seed.
         max_batch: most instances per forward pass (crop mode).
+        overrides: :data:`INFERENCE_FIELDS` of the pose run's config to change (``predict-pose --set``).
     Raises:
         CheckpointError: corrupt/incompatible checkpoints, or a refiner of another pose run.
+        ConfigError: a bad override.
     """
 
     def __init__(self, pose, refiner=None, *, iterations: int | None = None, device: str | None = None, icp: bool = False,
                  colour_verify: bool = False, reader=None, score_thresh: float = MIN_DETECTION_SCORE, seed: int = 0,
-                 max_batch: int = 64):
-        dev = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
+                 max_batch: int = 64, overrides: dict | None = None):
+        from ..runs import pick_device
+
+        dev = pick_device(device)  # auto / None: the GPU when present
+        overrides = check_inference_overrides(overrides)
         pose_ckpt = ck.load(pose, kind="pose")
         net, cfg = load_posenet(pose_ckpt, dev)
+        cfg = cfg.replace(**overrides) if overrides else cfg
         refiner_ckpt, ref_net, ref_cfg = None, None, None
         if refiner is not None:
             refiner_ckpt = ck.load(refiner, kind="refiner")
@@ -246,8 +272,8 @@ class Estimator:
 
 def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: int | None = None, icp: bool = False,
                     colour_verify: bool = False, device: str | None = None, split: str = "test", limit: int = 0,
-                    score_thresh: float = MIN_DETECTION_SCORE, progress: bool = False,
-                    estimator: Estimator | None = None, indices=None) -> tuple[list[PoseEstimate], Estimator]:
+                    score_thresh: float = MIN_DETECTION_SCORE, progress: bool = False, estimator: Estimator | None = None,
+                    indices=None, overrides: dict | None = None) -> tuple[list[PoseEstimate], Estimator]:
     """Estimate poses on every image of a dataset (disk reads are not timed).
 
     Args:
@@ -255,6 +281,7 @@ def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: 
             score_thresh: see :class:`Estimator`. masks: ``"gt"`` or a prediction directory of
             ``sixdpose segment``. split: BOP split. limit: first N images only (0: all).
             indices: positions in ``reader.keys()`` of the images to predict (None: ``limit`` decides).
+            overrides: see :class:`Estimator`.
     Returns:
         ``(estimates, estimator)``.
     Raises:
@@ -264,7 +291,7 @@ def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: 
 
     reader = as_reader(data, split=split)
     est = estimator or Estimator(pose, refiner, iterations=iterations, device=device, icp=icp, colour_verify=colour_verify,
-                                 reader=reader, score_thresh=score_thresh)
+                                 reader=reader, score_thresh=score_thresh, overrides=overrides)
     if masks != "gt" and not Path(masks).is_dir():
         raise PoseError(f"{masks}: prediction directory not found (use --masks gt for ground-truth masks)")
     if masks != "gt":

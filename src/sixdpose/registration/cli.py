@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import logging
 
+from .. import options as O
 from ..config import add_set_option, parse_overrides
-from ..constants import MIN_DETECTION_SCORE
 from ..registry import HYBRID_ALGORITHMS
+from .presets import PRESETS
 
 
 def register(sub) -> None:
@@ -14,21 +15,21 @@ def register(sub) -> None:
     p = sub.add_parser("register", help="hybrid pose estimation (RANSAC / FGR / Super4PCS [+ ICP])",
                        description="Register every instance of a dataset split; write a BOP results CSV and, "
                                    "beside it, <out>.config.yml (the parameters used).")
-    p.add_argument("--data", required=True, help="dataset directory (synthetic layout or BOP root)")
+    O.add(p, "--data")
     p.add_argument("--method", required=True, choices=list(HYBRID_ALGORITHMS))
     p.add_argument("--icp", action="store_true", help="refine with ICP (point-to-plane by default)")
-    p.add_argument("--masks", default="gt", help="'gt' or a directory of predicted masks (<scene>_<im>.npz)")
-    p.add_argument("--split", default="test", help="BOP split (ignored for the synthetic layout)")
-    p.add_argument("--out", required=True, help="results CSV to write")
-    p.add_argument("--preset", default="default", help="parameter preset: default | paper")
+    O.add(p, "--masks", help="'gt' or a directory of predicted masks (<scene>_<im>.npz)")
+    O.add(p, "--split")
+    O.add(p, "--out", help="results CSV to write")
+    O.add_profile(p, PRESETS, help="parameter preset (sixdpose.registration.presets; default: default)")
     add_set_option(p)
-    p.add_argument("--workers", type=int, default=2, help="processes (default 2)")
-    p.add_argument("--limit", type=int, default=None, help="only the first N images")
-    p.add_argument("--stride", type=int, default=1, help="only every N-th image (a fixed subset spread over the scenes)")
-    p.add_argument("--min-px", type=int, default=0, help="with GT masks, skip instances with fewer visible pixels")
-    p.add_argument("--min-score", type=float, default=MIN_DETECTION_SCORE,
-                   help="with predicted masks, skip detections whose score is below this (default %(default)s)")
-    p.add_argument("--no-progress", action="store_true")
+    O.add(p, "--workers")
+    O.add(p, "--limit")
+    p.add_argument("--stride", type=O.Int(1, 1_000_000), default=1,
+                   help="only every N-th image (a fixed subset spread over the scenes)")
+    O.add(p, "--min-px")
+    O.add(p, "--score-thresh", help="with predicted masks, skip detections whose score is below this (default %(default)s)")
+    O.add(p, "--no-progress")
     p.set_defaults(func=_run)
 
 
@@ -38,24 +39,19 @@ def _run(args) -> int:
     from ..artifacts.poses import RESULTS_HEADER, write_results
     from ..artifacts.tables import write_table
     from ..datasets.readers import open_dataset
-    from ..errors import UserError
     from ..fileio import claim_output_file
     from .presets import get_preset
     from .runner import run_registration
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    cfg = get_preset(args.preset, **parse_overrides(args.overrides))
-    if args.workers < 1:
-        raise UserError("--workers must be >= 1")
-    if args.stride < 1:
-        raise UserError("--stride must be >= 1")
+    cfg = get_preset(args.profile, **parse_overrides(args.overrides))
     out = Path(args.out)
     claim_output_file(out, RESULTS_HEADER)  # refuse a foreign file before any work
     ds = open_dataset(args.data, split=args.split)
     indices = range(0, len(ds), args.stride) if args.stride > 1 else None
     failures: list = []
     rows = run_registration(ds, args.method, icp=args.icp, masks=args.masks, cfg=cfg, workers=args.workers,
-                            limit=args.limit, min_px=args.min_px, min_score=args.min_score,
+                            limit=args.limit or None, min_px=args.min_px, min_score=args.score_thresh,
                             progress=not args.no_progress, indices=indices, failures=failures)
     write_results(rows, out)
     cfg.save(out.with_name(out.stem + ".config.yml"))

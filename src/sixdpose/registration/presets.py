@@ -95,7 +95,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..config import Config, from_profile
+from ..config import Config, bounded, from_profile
 
 
 @dataclass(frozen=True)
@@ -132,54 +132,54 @@ class RegistrationConfig(Config):
         seed: random seed of RANSAC, Super4PCS and the colour search.
     """
 
-    scene_voxel_rel: float | None = 0.03
-    model_voxel: float = 0.002
-    model_voxel_rel: float | None = 0.03
-    feature_voxel: float = 0.002
-    gate_rel: float | None = 1.0
-    normal_knn: int = 10
-    fpfh_radius_factor: float = 5.0
-    fpfh_max_nn: int = 100
-    ransac_distance_factor: float = 1.5
-    ransac_max_iteration: int = 50000
-    ransac_confidence: float = 0.999
-    ransac_n: int = 3
-    ransac_edge_length: float = 0.9
+    scene_voxel_rel: float | None = bounded(0.03, min=0, max=1, min_open=True)
+    model_voxel: float = bounded(0.002, min=0, max=1, min_open=True)
+    model_voxel_rel: float | None = bounded(0.03, min=0, max=1, min_open=True)
+    feature_voxel: float = bounded(0.002, min=0, max=1, min_open=True)
+    gate_rel: float | None = bounded(1.0, min=0, max=100, min_open=True)
+    normal_knn: int = bounded(10, min=1, max=10_000)
+    fpfh_radius_factor: float = bounded(5.0, min=0, max=1000, min_open=True)
+    fpfh_max_nn: int = bounded(100, min=1, max=10_000)
+    ransac_distance_factor: float = bounded(1.5, min=0, max=1000, min_open=True)
+    ransac_max_iteration: int = bounded(50000, min=1, max=100_000_000)
+    ransac_confidence: float = bounded(0.999, min=0, max=1, min_open=True)
+    ransac_n: int = bounded(3, min=3, max=100)
+    ransac_edge_length: float = bounded(0.9, min=0, max=1)
     ransac_mutual_filter: bool = False
-    fgr_distance_factor: float = 0.5
-    fgr_iterations: int = 64
-    s4pcs_overlap: float = 0.9
-    s4pcs_delta: float = 0.01
-    s4pcs_delta_rel: float | None = 0.03
-    s4pcs_samples: int = 200
-    s4pcs_bases: int | None = None
-    s4pcs_normal_tol_deg: float | None = 25.0
-    s4pcs_stop_lcp: float = 0.9
-    s4pcs_max_candidates: int = 10000
-    s4pcs_max_pairs: int = 5000
-    s4pcs_max_time: float | None = 0.5
-    s4pcs_pair_tol_factor: float = 1.0
-    s4pcs_max_q: int | None = 1000
-    s4pcs_join_budget: int | None = None
+    fgr_distance_factor: float = bounded(0.5, min=0, max=1000, min_open=True)
+    fgr_iterations: int = bounded(64, min=1, max=1_000_000)
+    s4pcs_overlap: float = bounded(0.9, min=0, max=1, min_open=True)
+    s4pcs_delta: float = bounded(0.01, min=0, max=1, min_open=True)
+    s4pcs_delta_rel: float | None = bounded(0.03, min=0, max=10, min_open=True)
+    s4pcs_samples: int = bounded(200, min=1, max=1_000_000)
+    s4pcs_bases: int | None = bounded(None, min=1, max=1_000_000)
+    s4pcs_normal_tol_deg: float | None = bounded(25.0, min=0, max=180, min_open=True)
+    s4pcs_stop_lcp: float = bounded(0.9, min=0, max=1)
+    s4pcs_max_candidates: int = bounded(10000, min=1, max=100_000_000)
+    s4pcs_max_pairs: int = bounded(5000, min=1, max=100_000_000)
+    s4pcs_max_time: float | None = bounded(0.5, min=0, max=86_400, min_open=True)
+    s4pcs_pair_tol_factor: float = bounded(1.0, min=0, max=1000, min_open=True)
+    s4pcs_max_q: int | None = bounded(1000, min=1, max=100_000_000)
+    s4pcs_join_budget: int | None = bounded(None, min=1)
     icp_kind: str = "point_to_plane"
-    icp_distance_factor: float = 2.0
-    icp_max_iteration: int = 30
+    icp_distance_factor: float = bounded(2.0, min=0, max=1000, min_open=True)
+    icp_max_iteration: int = bounded(30, min=1, max=1_000_000)
     colour_verify: bool = True
-    cv_rotations: int = 2048
-    cv_points: int = 150
-    cv_points_fine: int = 600
-    cv_tol_rel: float = 0.02
-    cv_coarse_sigma_rel: float = 0.05
-    cv_geo_weight: float = 1.0
-    cv_smooth_rel: float = 0.1
-    cv_keep: int = 8
-    cv_refine: int = 5
-    cv_perturbations: int = 48
-    cv_refine_deg: float = 30.0
-    cv_min_gain: float = 0.02
-    cv_nms_deg: float = 30.0
-    cv_grid_cells: int = 64
-    seed: int = 0
+    cv_rotations: int = bounded(2048, min=1, max=1_000_000)
+    cv_points: int = bounded(150, min=1, max=1_000_000)
+    cv_points_fine: int = bounded(600, min=1, max=1_000_000)
+    cv_tol_rel: float = bounded(0.02, min=0, max=10, min_open=True)
+    cv_coarse_sigma_rel: float = bounded(0.05, min=0, max=10, min_open=True)
+    cv_geo_weight: float = bounded(1.0, min=0, max=1000)
+    cv_smooth_rel: float = bounded(0.1, min=0, max=10)
+    cv_keep: int = bounded(8, min=1, max=1000)
+    cv_refine: int = bounded(5, min=0, max=100)
+    cv_perturbations: int = bounded(48, min=1, max=100_000)
+    cv_refine_deg: float = bounded(30.0, min=0, max=180, min_open=True)
+    cv_min_gain: float = bounded(0.02, min=-1, max=1)
+    cv_nms_deg: float = bounded(30.0, min=0, max=180)
+    cv_grid_cells: int = bounded(64, min=1, max=4096)
+    seed: int = bounded(0, min=0, max=2**32 - 1)
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first invalid field."""

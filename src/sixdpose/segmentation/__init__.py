@@ -3,8 +3,8 @@
 Stage commands (see :mod:`.cli`)::
 
     sixdpose train-seg --data DIR --out RUN_DIR [--profile smoke|paper] [--resume]
-    sixdpose segment   --data DIR --ckpt RUN_DIR --out PRED_DIR [--subset all|train|test]
-    sixdpose eval-seg  --data DIR --pred PRED_DIR [--figures figures/]
+    sixdpose segment   --data DIR --seg RUN_DIR --out PRED_DIR [--subset all|train|test]
+    sixdpose eval-seg  --data DIR --masks PRED_DIR [--figures figures/]
 
 Modules: :mod:`.config` (typed config, profiles ``smoke``/``paper``), :mod:`.model` (torchvision Mask
 R-CNN, ResNet-FPN), :mod:`.data` (class map, split, scan of bad annotations, augmentation),

@@ -6,9 +6,10 @@ Multi-GPU training: ``torchrun --nproc_per_node N -m sixdpose.cli train-seg ...`
 
 from __future__ import annotations
 
+from .. import options as O
 from ..config import add_set_option, parse_overrides
-from .config import PROFILES
 from ..logs import setup_logging
+from .config import PROFILES, SegConfig
 
 
 def _cmd_train(args) -> int:
@@ -16,10 +17,12 @@ def _cmd_train(args) -> int:
 
     setup_logging(args.verbose)
     overrides = parse_overrides(args.overrides)
-    for name in ("epochs", "batch_size", "lr", "seed", "num_workers", "max_steps_per_epoch", "val_fraction"):
+    for name in ("epochs", "batch_size", "lr", "seed", "max_steps_per_epoch", "val_fraction"):
         v = vars(args)[name]
         if v is not None:
             overrides[name] = v
+    if args.workers is not None:
+        overrides["num_workers"] = args.workers
     if args.threads is not None:
         overrides["num_threads"] = args.threads
     if args.train_split is not None:
@@ -28,6 +31,10 @@ def _cmd_train(args) -> int:
         overrides["test_split"] = args.test_split
     if args.no_amp:
         overrides["amp"] = False
+    if not args.resume:  # a bad --set fails here, before the run directory exists
+        from .config import profile_config
+
+        profile_config(args.profile, **overrides)
     summary = train(
         args.data,
         args.out,
@@ -65,8 +72,9 @@ def _cmd_segment(args) -> int:
         batch_size=args.batch_size,
         device=args.device,
         score_thresh=args.score_thresh,
-        num_workers=args.num_workers,
+        num_workers=args.workers,
         progress=not args.no_progress,
+        overrides=parse_overrides(args.overrides),
     )
     print(
         f"segmented {r['images']} image(s), {r['detections']} detection(s), "
@@ -76,10 +84,12 @@ def _cmd_segment(args) -> int:
 
 
 def _cmd_eval(args) -> int:
+    from ..fileio import check_output_location
     from .evaluate import evaluate
 
     setup_logging(args.verbose)
-    m = evaluate(args.data, args.pred, args.figures, tag=args.tag)
+    check_output_location(args.figures)  # a file or an unwritable place fails before any work
+    m = evaluate(args.data, args.masks, args.figures, tag=args.tag, progress=not args.no_progress)
     mk, bx = m["overall"]["mask"], m["overall"]["box"]
     print(
         f"{m['n_images']} image(s), {m['n_gt']} instance(s): mask AP {mk['AP']:.3f} AP50 {mk['AP50']:.3f} "
@@ -98,26 +108,29 @@ def register(subparsers) -> None:
         description="Train Mask R-CNN (ResNet-FPN) on a dataset's target objects. Profiles: smoke (CPU, "
         "minutes) and paper (section IV-A). Multi-GPU: run under torchrun.",
     )
-    p.add_argument("--data", required=True, help="dataset directory (synthetic layout or BOP root)")
-    p.add_argument("--out", required=True, help="run directory (config, split, checkpoints, metrics)")
-    p.add_argument("--profile", choices=tuple(PROFILES), default=None,
-                   help="named config: smoke (CI), cpu (2-core CPU, about 30 min on the train split), paper "
-                        "(section IV-A, GPU); default smoke; on --resume: the run's")
+    O.add(p, "--data")
+    O.add(p, "--out", help="run directory (config, split, checkpoints, metrics)")
+    O.add_profile(p, PROFILES, help="named config: smoke (CI), cpu (2-core CPU, about 30 min on the train split), "
+                  "paper (section IV-A, GPU); default smoke; on --resume: the run's")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its last completed epoch")
-    p.add_argument("--epochs", type=int, help="override the number of epochs (allowed on --resume to extend a run)")
-    p.add_argument("--batch-size", dest="batch_size", type=int, help="images per step and process")
-    p.add_argument("--lr", type=float, help="initial learning rate")
-    p.add_argument("--seed", type=int, help="seed of split, initialisation and augmentation")
-    p.add_argument("--val-fraction", dest="val_fraction", type=float, help="held-out share of a synthetic dataset")
-    p.add_argument("--max-steps-per-epoch", dest="max_steps_per_epoch", type=int, help="cap steps per epoch (0: none)")
-    p.add_argument("--train-split", dest="train_split", help="BOP split used for training (default train)")
-    p.add_argument("--test-split", dest="test_split", help="BOP split used for testing (default test)")
-    p.add_argument("--num-workers", dest="num_workers", type=int, help="data-loading workers")
-    p.add_argument("--threads", type=int, help="torch CPU threads per process")
-    p.add_argument("--device", default=None, help="cpu, cuda or auto (default: GPU when present)")
+    O.add(p, "--epochs", help="override the number of epochs (allowed on --resume to extend a run)")
+    O.add(p, "--batch-size", help="images per step and process")
+    p.add_argument("--lr", type=O.field_type(SegConfig, "lr"), help="initial learning rate")
+    O.add(p, "--seed", help="seed of split, initialisation and augmentation")
+    p.add_argument("--val-fraction", dest="val_fraction", type=O.field_type(SegConfig, "val_fraction"),
+                   help="held-out share of a synthetic dataset")
+    p.add_argument("--max-steps-per-epoch", dest="max_steps_per_epoch",
+                   type=O.field_type(SegConfig, "max_steps_per_epoch"),
+                   help="cap steps per epoch (0: none)")
+    p.add_argument("--train-split", dest="train_split", type=O.Name(),
+                   help="BOP split used for training (default train)")
+    p.add_argument("--test-split", dest="test_split", type=O.Name(), help="BOP split used for testing (default test)")
+    O.add(p, "--workers")
+    O.add(p, "--threads")
+    O.add(p, "--device")
     p.add_argument("--no-amp", action="store_true", help="disable mixed precision on GPU")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("-v", "--verbose", action="store_true", help="log every skipped instance and epoch")
+    O.add(p, "--no-progress")
+    O.add(p, "--verbose", help="log every skipped instance and epoch")
     add_set_option(p)
     p.set_defaults(func=_train_entry)
 
@@ -127,18 +140,19 @@ def register(subparsers) -> None:
         description="Write PRED_DIR/<scene_id>_<im_id>.npz (masks (N,H,W) bool, labels (N,) obj ids, "
         "scores (N,) float32) per image, and PRED_DIR/coco_results.json.",
     )
-    p.add_argument("--data", required=True, help="dataset directory")
-    p.add_argument("--ckpt", required=True, help="run directory of train-seg (or a checkpoint file)")
-    p.add_argument("--out", required=True, help="prediction directory")
-    p.add_argument("--split", default="test", help="BOP split to segment (default test; ignored for synthetic data)")
+    O.add(p, "--data")
+    O.add(p, "--seg")
+    O.add(p, "--out", help="prediction directory")
+    O.add(p, "--split", help="BOP split to segment (default test; ignored for synthetic data)")
     p.add_argument("--subset", choices=("all", "train", "test"), default="all", help="all images, or the run's train/test images")
-    p.add_argument("--batch-size", dest="batch_size", type=int, default=4, help="images per forward pass")
-    p.add_argument("--score-thresh", dest="score_thresh", type=float, default=None, help="minimum detection score (default: the run's, 0.05)")
-    p.add_argument("--num-workers", dest="num_workers", type=int, default=0, help="image-loading workers")
-    p.add_argument("--threads", type=int, default=0, help="torch CPU threads")
-    p.add_argument("--device", default=None, help="cpu, cuda or auto")
-    p.add_argument("--no-progress", action="store_true")
-    p.add_argument("-v", "--verbose", action="store_true")
+    O.add(p, "--batch-size")
+    O.add(p, "--score-thresh")
+    O.add(p, "--workers")
+    O.add(p, "--threads")
+    O.add(p, "--device")
+    O.add(p, "--no-progress")
+    O.add(p, "--verbose")
+    add_set_option(p)
     p.set_defaults(func=_cmd_segment)
 
     p = subparsers.add_parser(
@@ -147,11 +161,12 @@ def register(subparsers) -> None:
         description="Evaluate PRED_DIR against the dataset's ground truth with pycocotools; writes "
         "seg_ap<TAG>.csv and .tex to --figures.",
     )
-    p.add_argument("--data", required=True, help="dataset directory that was segmented")
-    p.add_argument("--pred", required=True, help="prediction directory of `sixdpose segment`")
+    O.add(p, "--data", help="dataset directory that was segmented")
+    O.add(p, "--masks", required=True, help="prediction directory of `sixdpose segment`")
     p.add_argument("--figures", default="figures", help="output directory of the tables (default figures/)")
-    p.add_argument("--tag", default="", help="file name suffix, e.g. _smoke")
-    p.add_argument("-v", "--verbose", action="store_true")
+    p.add_argument("--tag", default="", type=O.Name(allow_empty=True), help="file name suffix, e.g. _smoke")
+    O.add(p, "--no-progress")
+    O.add(p, "--verbose")
     p.set_defaults(func=_cmd_eval)
 
 

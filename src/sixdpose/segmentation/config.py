@@ -33,7 +33,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..config import from_profile
+from ..config import bounded, from_profile, path_name
 from ..constants import DETECTION_SCORE_FLOOR
 from ..training.schedule import TrainSchedule
 
@@ -83,36 +83,36 @@ class SegConfig(TrainSchedule):
     # model
     backbone: str = "resnet50"
     pretrained: bool = True
-    trainable_layers: int = 5
-    fpn_channels: int = 256
-    box_head_dim: int = 1024
-    mask_head_channels: int = 256
-    min_size: int = 480
-    max_size: int = 800
-    train_min_sizes: tuple[int, ...] = (384, 416, 448, 480, 512, 544, 576)
-    anchor_sizes: tuple[int, ...] = (32, 64, 128, 256, 512)
-    rpn_pre_nms_train: int = 2000
-    rpn_post_nms_train: int = 2000
-    rpn_pre_nms_test: int = 1000
-    rpn_post_nms_test: int = 1000
-    rpn_batch_size: int = 256
-    box_batch_size: int = 512
-    detections_per_img: int = 100
-    score_thresh: float = DETECTION_SCORE_FLOOR
+    trainable_layers: int = bounded(5, min=0, max=5)
+    fpn_channels: int = bounded(256, min=1, max=4096)
+    box_head_dim: int = bounded(1024, min=1, max=65536)
+    mask_head_channels: int = bounded(256, min=1, max=4096)
+    min_size: int = bounded(480, min=1, max=8192)
+    max_size: int = bounded(800, min=1, max=8192)
+    train_min_sizes: tuple[int, ...] = bounded((384, 416, 448, 480, 512, 544, 576), min=1, max=8192)
+    anchor_sizes: tuple[int, ...] = bounded((32, 64, 128, 256, 512), min=1, max=8192)
+    rpn_pre_nms_train: int = bounded(2000, min=1, max=100_000)
+    rpn_post_nms_train: int = bounded(2000, min=1, max=100_000)
+    rpn_pre_nms_test: int = bounded(1000, min=1, max=100_000)
+    rpn_post_nms_test: int = bounded(1000, min=1, max=100_000)
+    rpn_batch_size: int = bounded(256, min=1, max=100_000)
+    box_batch_size: int = bounded(512, min=1, max=100_000)
+    detections_per_img: int = bounded(100, min=1, max=10_000)
+    score_thresh: float = bounded(DETECTION_SCORE_FLOOR, min=0)  # above 1: nothing passes (a test uses it)
     # schedule defaults that differ from TrainSchedule's
-    batch_size: int = 4
-    lr_step_epochs: int = 30
-    lr_gamma: float = 0.1
-    grad_clip: float = 10.0
-    log_every: int = 1
+    batch_size: int = bounded(4, min=1, max=1024)
+    lr_step_epochs: int = bounded(30, min=1, max=100_000)
+    lr_gamma: float = bounded(0.1, min=0, max=1, min_open=True)
+    grad_clip: float = bounded(10.0, min=0, max=1e6)
+    log_every: int = bounded(1, min=1, max=1_000_000)
     # data
     split_by: str = "image"
-    val_fraction: float = 0.1
-    train_split: str = "train"
-    test_split: str = "test"
-    min_mask_pixels: int = 1
-    color_jitter: tuple[float, float, float, float] = (0.3, 0.3, 0.3, 0.03)
-    hflip_prob: float = 0.0
+    val_fraction: float = bounded(0.1, min=0, max=1, max_open=True)
+    train_split: str = path_name("train")
+    test_split: str = path_name("test")
+    min_mask_pixels: int = bounded(1, min=0, max=10_000_000)
+    color_jitter: tuple[float, float, float, float] = bounded((0.3, 0.3, 0.3, 0.03), min=0, max=10)
+    hflip_prob: float = bounded(0.0, min=0, max=1)
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first invalid field."""

@@ -173,7 +173,8 @@ def open_segmented(data: str | Path, pred_dir: str | Path):
     return ds, meta, index
 
 
-def evaluate(data: str | Path, pred_dir: str | Path, out_dir: str | Path | None = None, *, tag: str = "") -> dict:
+def evaluate(data: str | Path, pred_dir: str | Path, out_dir: str | Path | None = None, *, tag: str = "",
+             progress: bool = False) -> dict:
     """Evaluate the predictions of ``sixdpose segment`` against the ground truth of ``data``.
 
     The evaluated images are those listed in ``PRED_DIR/meta.json`` (all images that were segmented,
@@ -184,6 +185,7 @@ def evaluate(data: str | Path, pred_dir: str | Path, out_dir: str | Path | None 
         pred_dir: output of :func:`~.infer.segment`.
         out_dir: where to write ``seg_ap<tag>.csv`` / ``.tex`` (e.g. ``figures/``); ``None``: no files.
         tag: suffix of the file names, e.g. ``"_smoke"``.
+        progress: a progress bar over the ground-truth images read.
     Returns:
         The dict of :func:`coco_evaluate` (plus ``files`` when written).
     Raises:
@@ -197,7 +199,10 @@ def evaluate(data: str | Path, pred_dir: str | Path, out_dir: str | Path | None 
     missing = [k for k in wanted if k not in index]
     if missing:
         raise DatasetError(f"{data}: {len(missing)} segmented image(s) are not in the dataset (first {missing[0]})")
-    gt, stats = coco_ground_truth((ds[index[k]] for k in wanted), classes)
+    from tqdm import tqdm
+
+    samples = (ds[index[k]] for k in tqdm(wanted, desc="eval-seg", unit="img", disable=not progress))
+    gt, stats = coco_ground_truth(samples, classes)
     results = read_coco_results(pred_dir)
     if results is None:  # rebuild from the npz files
         results = []

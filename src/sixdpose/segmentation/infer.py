@@ -1,6 +1,6 @@
 """Inference: a trained run -> per-image instance masks (the format the registration stage reads).
 
-Output of ``sixdpose segment --data DIR --ckpt RUN_DIR --out PRED_DIR``: the predicted-masks artifact
+Output of ``sixdpose segment --data DIR --seg RUN_DIR --out PRED_DIR``: the predicted-masks artifact
 (:mod:`sixdpose.artifacts.predictions`, its one writer and reader): ``PRED_DIR/<scene_id>_<im_id>.npz``
 per image, ``PRED_DIR/coco_results.json`` and ``PRED_DIR/meta.json`` (checkpoint, classes, images,
 score threshold).
@@ -45,6 +45,25 @@ def encode_rle(mask: np.ndarray) -> dict:
     return rle
 
 
+#: Fields of a run's :class:`~.config.SegConfig` that ``segment --set`` may change: they act at inference
+#: only (the test-time resize, the RPN's test proposals, the detections kept, mixed precision).
+INFERENCE_FIELDS = ("score_thresh", "detections_per_img", "min_size", "max_size", "rpn_pre_nms_test",
+                    "rpn_post_nms_test", "amp")
+
+
+def check_inference_overrides(overrides: dict | None) -> dict:
+    """``overrides`` (field -> value) checked before any work: only :data:`INFERENCE_FIELDS`, each of
+    the field's type and bounds (against the default config). Raises :class:`ConfigError`."""
+    overrides = dict(overrides or {})
+    bad = sorted(set(overrides) - set(INFERENCE_FIELDS))
+    if bad:
+        raise ConfigError(f"segment --set: {', '.join(bad)} cannot change at inference (allowed: "
+                          f"{', '.join(INFERENCE_FIELDS)})")
+    if overrides:
+        SegConfig().replace(**overrides)
+    return overrides
+
+
 class Segmenter:
     """A trained Mask R-CNN ready for inference.
 
@@ -52,17 +71,26 @@ class Segmenter:
         ckpt: a run directory (its ``model.pt``, else ``last.pt``) or a checkpoint file.
         device: ``cpu``/``cuda``/``auto`` (default: the GPU when present).
         score_thresh: override the run's minimum detection score.
+        overrides: other :data:`INFERENCE_FIELDS` of the run's config to change (``--set``).
     Raises:
         CheckpointError: the checkpoint is missing, corrupt or does not fit its config.
     """
 
-    def __init__(self, ckpt: str | Path, device: str | None = None, score_thresh: float | None = None):
+    def __init__(self, ckpt: str | Path, device: str | None = None, score_thresh: float | None = None,
+                 overrides: dict | None = None):
+        overrides = check_inference_overrides(overrides)
         c = ck.load(ckpt)
         self.path = ck.resolve(ckpt)
         try:
             cfg = SegConfig.from_dict(c["config"])
-            if score_thresh is not None:
-                cfg = cfg.replace(score_thresh=float(score_thresh))
+        except (ValueError, TypeError, KeyError) as e:
+            raise ck.CheckpointError(
+                f"{self.path}: incompatible checkpoint ({str(e).strip().splitlines()[0][:300]})"
+            ) from None
+        cfg = cfg.replace(**overrides)  # ConfigError (one line naming the field) for a bad --set
+        if score_thresh is not None:
+            cfg = cfg.replace(score_thresh=float(score_thresh))
+        try:
             classes = ClassMap.from_list(c["classes"])
             model, _ = build_model(cfg, len(classes), init=c.get("init", "random"))
             model.load_state_dict(c["model"])
@@ -134,6 +162,7 @@ def segment(
     score_thresh: float | None = None,
     num_workers: int = 0,
     progress: bool = True,
+    overrides: dict | None = None,
 ) -> dict:
     """Segment every image of a dataset (or of the run's train/test subset) and write ``out``.
 
@@ -150,13 +179,15 @@ def segment(
         score_thresh: minimum score kept (default: the run's ``score_thresh``, 0.05).
         num_workers: image-loading worker processes.
         progress: show a progress bar.
+        overrides: :data:`INFERENCE_FIELDS` of the run's config to change (``--set``).
     Returns:
         ``{"images": n, "detections": n, "seconds": s, "images_per_s": r, "pred_dir": str}``.
     Raises:
         CheckpointError, DatasetError (incl. a checkpoint trained on other objects than the dataset's).
     """
+    overrides = check_inference_overrides(overrides)
     claim_output_dir(out, "segment", create=False)  # refuse a foreign directory before loading anything
-    seg = Segmenter(ckpt, device=device, score_thresh=score_thresh)
+    seg = Segmenter(ckpt, device=device, score_thresh=score_thresh, overrides=overrides)
     if subset == "all":
         ds = as_reader(data, split=split)
         indices = list(range(len(ds)))
@@ -164,7 +195,7 @@ def segment(
     elif subset in ("train", "test"):
         split_file = Path(ckpt) / "split.json"
         if not split_file.is_file():
-            raise DatasetError(f"{split_file}: --subset {subset} needs --ckpt to be a run directory with split.json")
+            raise DatasetError(f"{split_file}: --subset {subset} needs --seg to be a run directory with split.json")
         record = json.loads(split_file.read_text())
         ds, indices = open_part(data, record, subset)
         reader_split = record[subset]["split"]

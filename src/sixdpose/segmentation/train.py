@@ -10,7 +10,7 @@ Run directory ``RUN_DIR`` after training::
     status.json     finished or not, completed epochs, fingerprint of the training data
     metrics.csv     one row per logged step: epoch, step, lr, loss and each loss term, seconds
     last.pt         resumable checkpoint, rewritten atomically after every epoch
-    model.pt        final weights (what ``sixdpose segment --ckpt RUN_DIR`` loads)
+    model.pt        final weights (what ``sixdpose segment --seg RUN_DIR`` loads)
 
 Optimisation follows the paper (section IV-A): Adam, LR decayed by ``lr_gamma`` every
 ``lr_step_epochs`` epochs (the engine's schedule, :func:`sixdpose.training.learning_rate`). On CUDA,

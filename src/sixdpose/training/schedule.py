@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..config import Config
+from ..config import Config, bounded
 
 #: Schedule fields a ``--resume`` may change (they do not alter what an epoch computes).
 RESUMABLE = ("epochs", "time_budget", "num_threads", "num_workers", "log_every")
@@ -36,21 +36,21 @@ class TrainSchedule(Config):
         log_every: steps between rows of ``metrics.csv``.
     """
 
-    epochs: int = 100
-    batch_size: int = 8
-    lr: float = 1e-3
-    warmup_steps: int = 0
-    lr_step_epochs: int = 10
-    lr_gamma: float = 0.6
-    weight_decay: float = 0.0
-    grad_clip: float = 0.0
+    epochs: int = bounded(100, min=1, max=100_000)
+    batch_size: int = bounded(8, min=1, max=1024)
+    lr: float = bounded(1e-3, min=0, max=10, min_open=True)
+    warmup_steps: int = bounded(0, min=0, max=100_000_000)
+    lr_step_epochs: int = bounded(10, min=1, max=100_000)
+    lr_gamma: float = bounded(0.6, min=0, max=1, min_open=True)
+    weight_decay: float = bounded(0.0, min=0, max=1)
+    grad_clip: float = bounded(0.0, min=0, max=1e6)
     amp: bool = True
-    time_budget: float = 0.0
-    max_steps_per_epoch: int = 0
-    seed: int = 0
-    num_workers: int = 2
-    num_threads: int = 0
-    log_every: int = 10
+    time_budget: float = bounded(0.0, min=0, max=30 * 24 * 3600.0)
+    max_steps_per_epoch: int = bounded(0, min=0, max=100_000_000)
+    seed: int = bounded(0, min=0, max=2**32 - 1)
+    num_workers: int = bounded(2, min=0, max=256)
+    num_threads: int = bounded(0, min=0, max=1024)
+    log_every: int = bounded(10, min=1, max=1_000_000)
 
     def validate(self) -> None:
         """Check the schedule fields (ValueError naming the field); subclasses call it first."""
