@@ -52,6 +52,14 @@ YCBV_POSE_paper := --profile paper
 YCBV_POSE_LONG_cpu   := --profile cpu --epochs 12 --set time_budget=0
 YCBV_POSE_LONG_paper := --profile paper
 
+# `sixdpose pose-ablation` (notebook 05 shows its result results/P/pose_ablation_P.json): the budget of every
+# variant (equal epochs; on the paper's machine equal seconds) and, for smoke and demo, the images of the
+# held-out split scored (a pipeline check); cpu and paper score every image of data/val (never test)
+ABLATION_smoke := --epochs 3 --val-images 4
+ABLATION_demo  := --epochs 3 --val-images 6
+ABLATION_cpu   := --epochs 1
+ABLATION_paper := --time-budget 1200
+
 # ---- the column of $(PROFILE) ----
 _IDX := $(strip $(foreach i,1 2 3 4 5 6 7 8,$(if $(filter $(PROFILE),$(word $(i),$(PROFILES))),$(i))))
 ifeq ($(_IDX),)
