@@ -178,6 +178,32 @@ def _depth_noise(src: Source) -> str:
         "\n\ninst/s: from the results CSVs' per-image times (`register --workers 2` sharing the 2-core CPU)."
 
 
+#: The hybrid methods of the ``cpu`` graph on ``data/test`` with GT masks: (label, paper key, method); a row
+#: is shown when ``results/cpu/test_gt_<method>.json`` exists (``make reproduce PROFILE=cpu`` writes all six).
+HYBRID_CPU_TEST = [
+    ("RANSAC", "ransac", "ransac"), ("RANSAC + ICP", "ransac+icp", "ransac_icp"), ("FGR", "fgr", "fgr"),
+    ("FGR + ICP", "fgr+icp", "fgr_icp"), ("Super4PCS", "super4pcs", "super4pcs"),
+    ("Super4PCS + ICP", "super4pcs+icp", "super4pcs_icp"),
+]
+
+
+def _hybrid_cpu_test(src: Source) -> str:
+    rows = []
+    for label, paper, method in HYBRID_CPU_TEST:
+        name = f"cpu/test_gt_{method}"
+        if not src.exists(name):
+            continue
+        f = src(name).figures
+        pf = paper_figure("III", paper) if paper else None
+        rows.append([label, fmt(pf) if pf is not None else "",
+                     f"{fmt(f['accuracy'])} ({f['n_correct']}/{f['n_gt']})", f["n_images"], f["instances_per_s"]])
+    missing = [label for label, _, method in HYBRID_CPU_TEST if not src.exists(f"cpu/test_gt_{method}")]
+    note = (f"\n\nNot in `results/cpu/` yet (`make reproduce PROFILE=cpu` writes them): {', '.join(missing)}."
+            if missing else "")
+    return md_table(["method", f"{_T3.citation} ADD(-S) %", "`data/test` ADD(-S) % (correct/GT)", "images",
+                     "inst/s (`register --workers 2`)"], rows) + note
+
+
 def _ycbv_bop(src: Source) -> str:
     r = src("cpu/ycbv_gt_ransac_icp")
     f, b = r.figures, r.figures.get("bop") or {}
@@ -233,6 +259,7 @@ BLOCKS = {
     "learned_cpu_summary": _learned_cpu_summary,
     "learned_cpu_per_object": _learned_cpu_per_object,
     "depth_noise": _depth_noise,
+    "hybrid_cpu_test": _hybrid_cpu_test,
     "ycbv_bop": _ycbv_bop,
 }
 
