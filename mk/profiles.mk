@@ -26,7 +26,7 @@
 #               record come from the graph's results)
 #   YCBV        the synthetic-to-real branch (mk/reproduce.mk, notebook 09): yes = pose networks trained only
 #               on the generated `ycbv` / `ycbv_ideal` data, scored with the hybrid methods on the real
-#               YCB-Video frames of YCBV_REAL; no = notebook 09 trains its own smoke network on 6 generated
+#               YCB-Video frames of YCBV_REAL; no = the graph trains notebook 09's smoke network on 6 generated
 #               images (a pipeline check)
 
 PROFILES   := smoke        demo         cpu          paper

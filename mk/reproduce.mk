@@ -278,7 +278,7 @@ $(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT) &: notebooks/07_evaluation.ipy
 	$(EXEC)/02_dataset_overview.ipynb | $(VENV_OK)
 	$(call papermill,$<,-p PROFILE $(PROFILE) -p RESULTS ../$(RES) -p TEX ../$(GEN) -p TRAIN_DATA ../$(TRAIN_DIR) $(NB_FIG))
 
-# notebook 09: the synthetic-to-real networks of the YCBV branch (or, without it, its own smoke network)
+# notebook 09: the synthetic-to-real networks of the YCBV branch (or, without it, the smoke network and refiner of data/ycbv_$(PROFILE))
 $(EXEC)/09_synthetic_to_real.ipynb: notebooks/09_synthetic_to_real.ipynb $(NB09_NEEDS) | $(VENV_OK)
 	$(call papermill,$<,-p PROFILE $(PROFILE) -p WORKERS $(WORKERS) -p BOP_DATA $(abspath $(YCBV_REAL)) \
 	  -p BOP_SPLIT $(YCBV_SPLIT) $(NB09_ARGS) $(NB_FIG))
