@@ -26,7 +26,7 @@
 #               record come from the graph's results)
 #   YCBV        the synthetic-to-real branch (mk/reproduce.mk, notebook 09): yes = pose networks trained only
 #               on the generated `ycbv` / `ycbv_ideal` data, scored with the hybrid methods on the real
-#               YCB-Video frames of YCBV_REAL; no = notebook 09 trains its own smoke network on 6 generated
+#               YCB-Video frames of YCBV_REAL; no = the graph trains notebook 09's smoke network on 6 generated
 #               images (a pipeline check)
 
 PROFILES   := smoke        demo         cpu          paper
@@ -51,6 +51,14 @@ YCBV_POSE_paper := --profile paper
 # each; paper: the paper profile again, so the same networks)
 YCBV_POSE_LONG_cpu   := --profile cpu --epochs 12 --set time_budget=0
 YCBV_POSE_LONG_paper := --profile paper
+
+# `sixdpose pose-ablation` (notebook 05 shows its result results/P/pose_ablation_P.json): the budget of every
+# variant (equal epochs; on the paper's machine equal seconds) and, for smoke and demo, the images of the
+# held-out split scored (a pipeline check); cpu and paper score every image of data/val (never test)
+ABLATION_smoke := --epochs 3 --val-images 4
+ABLATION_demo  := --epochs 3 --val-images 6
+ABLATION_cpu   := --epochs 1
+ABLATION_paper := --time-budget 1200
 
 # ---- the column of $(PROFILE) ----
 _IDX := $(strip $(foreach i,1 2 3 4 5 6 7 8,$(if $(filter $(PROFILE),$(word $(i),$(PROFILES))),$(i))))

@@ -6,6 +6,9 @@
 #   runs/P/pose/model.pt, refiner/model.pt   sixdpose train-pose, train-refiner
 #   runs/P/poses/<split>_<masks>_<method>.csv  sixdpose register (hybrid) / predict-pose (learned)
 #   results/P/<split>_<masks>_<method>.json  sixdpose evaluate --result-name (+ .csv; commit, date, hardware)
+#   runs/P/seg/pred_test/meta.json           sixdpose segment    (notebook 03's held-out training images)
+#   data/<test>_kinect, results/P/test_kinect_gt_<method>.json  the test split with kinect depth (notebook 08)
+#   results/P/pose_ablation_P.json           sixdpose pose-ablation (notebook 05)
 #   notebooks/executed/P/NN_*.ipynb          papermill, on top of those files (figures/P/...)
 #   paper/generated/P/*.tex                  notebook 07: Tables I-III, per-object tables, macros
 #   paper/build/P/paper.pdf (+ paper/paper.pdf)  latexmk
@@ -13,7 +16,9 @@
 # P is $(PROFILE) (mk/profiles.mk). <split>: test (multi-instance) or single (no repeated object, the
 # paper's Table III subset); <masks>: gt or pred (Mask R-CNN of runs/P/seg); <method>: $(METHODS).
 # Each target is a file written atomically by the command that makes it, so an interrupted run resumes
-# where it stopped (training resumes from last.pt) and `make -n reproduce` prints the plan.
+# where it stopped (training resumes from last.pt) and `make -n reproduce` prints the plan. Every dataset,
+# trained network and result of record is a target here: the notebooks only read them (sixdpose.graph
+# names the target of a missing one).
 # LMO=/path/to/lmo (a full BOP LM-O with depth) adds the LM-O rows of Table I.
 
 SIXDPOSE := $(VENV)/bin/sixdpose
@@ -52,6 +57,10 @@ $(RUNS)/masks/%/meta.json: $(RUNS)/seg/model.pt | $(VENV_OK)
 $(RUNS)/masks/test/meta.json: $(DATA_test)/manifest.json
 $(RUNS)/masks/single/meta.json: $(DATA_single)/manifest.json
 
+# notebook 03's predictions: the run's own held-out training images (notebook 04 registers on them)
+$(RUNS)/seg/pred_test/meta.json: $(RUNS)/seg/model.pt $(TRAIN_DIR)/manifest.json | $(VENV_OK)
+	$(SIXDPOSE) segment --data $(TRAIN_DIR) --ckpt $(RUNS)/seg --subset test --out $(@D) --no-progress
+
 # ---- learned pose ------------------------------------------------------------------------------
 _val = $(if $(VAL_DIR),--val $(VAL_DIR))
 $(RUNS)/pose/model.pt: $(TRAIN_DIR)/manifest.json $(if $(VAL_DIR),$(VAL_DIR)/manifest.json) | $(VENV_OK)
@@ -61,6 +70,14 @@ $(RUNS)/pose/model.pt: $(TRAIN_DIR)/manifest.json $(if $(VAL_DIR),$(VAL_DIR)/man
 $(RUNS)/refiner/model.pt: $(RUNS)/pose/model.pt $(TRAIN_DIR)/manifest.json $(if $(VAL_DIR),$(VAL_DIR)/manifest.json) | $(VENV_OK)
 	$(SIXDPOSE) train-refiner --pose $(RUNS)/pose --data $(TRAIN_DIR) --out $(@D) $(_val) --no-progress \
 	  $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_POSE))
+
+# the ablation of notebook 05 (each option of the paper's architecture changed alone, the budget of
+# ABLATION_$(PROFILE)), scored on the validation split (smoke, demo: the test split's images)
+ABLATION_VAL := $(or $(VAL_DIR),$(DATA_test))
+ABLATION_RESULT := $(RES)/pose_ablation_$(PROFILE).json
+$(ABLATION_RESULT): $(TRAIN_DIR)/manifest.json $(ABLATION_VAL)/manifest.json | $(VENV_OK)
+	$(SIXDPOSE) pose-ablation --train $(TRAIN_DIR) --val $(ABLATION_VAL) --out $(RUNS)/pose_ablation --profile $(P_POSE) \
+	  $(ABLATION_$(PROFILE)) --no-progress --result-name pose_ablation_$(PROFILE) --results-dir $(RES)
 
 # ---- pose estimates: one results CSV per split x masks x method --------------------------------
 CMD_ransac         := register --method ransac
@@ -93,10 +110,23 @@ $(RES)/$(1)_$(2)_$(3).json: $(POSES)/$(1)_$(2)_$(3).csv $(DATA_$(1))/manifest.js
 endef
 $(foreach s,$(SPLITS),$(foreach k,$(MASKS),$(foreach m,$(METHODS),$(eval $(call pose_rule,$(s),$(k),$(m))))))
 
+# ---- sensor noise (notebook 08): the multi-instance test split again with the `kinect` depth model -----
+# (the same scenes and images; masks and poses exact), scored by the hybrid methods with ICP beside their
+# ideal-depth rows test_gt_<method>
+DATA_test_kinect := data/$(P_TEST_GEN)_kinect
+$(DATA_test_kinect)/manifest.json: | $(VENV_OK)
+	$(SIXDPOSE) generate --profile $(P_TEST_GEN) --set sensor=kinect --out $(@D) --workers $(WORKERS) --no-progress
+KINECT_METHODS := $(filter ransac_icp super4pcs_icp,$(HYBRID))
+$(foreach m,$(KINECT_METHODS),$(eval $(call pose_rule,test_kinect,gt,$(m))))
+KINECT_RESULTS := $(foreach m,$(KINECT_METHODS),$(RES)/test_kinect_gt_$(m).json)
+
 # the stages in the order of the plan (`make -n reproduce` lists them so)
-STAGES = $(foreach g,$(DATASETS),data/$(g)/manifest.json) $(RUNS)/seg/model.pt $(RUNS)/pose/model.pt \
-	$(RUNS)/refiner/model.pt $(RUNS)/masks/test/meta.json $(RUNS)/masks/single/meta.json $(YCBV_STAGES)
-RESULTS := $(foreach s,$(SPLITS),$(foreach k,$(MASKS),$(foreach m,$(METHODS),$(RES)/$(s)_$(k)_$(m).json)))
+STAGES = $(foreach g,$(DATASETS),data/$(g)/manifest.json) $(DATA_test_kinect)/manifest.json $(RUNS)/seg/model.pt \
+	$(RUNS)/pose/model.pt $(RUNS)/refiner/model.pt $(RUNS)/masks/test/meta.json $(RUNS)/masks/single/meta.json \
+	$(RUNS)/seg/pred_test/meta.json $(YCBV_STAGES)
+# results of record: every split x masks x method, the kinect rows and the ablation
+RESULTS := $(foreach s,$(SPLITS),$(foreach k,$(MASKS),$(foreach m,$(METHODS),$(RES)/$(s)_$(k)_$(m).json))) \
+	$(KINECT_RESULTS) $(ABLATION_RESULT)
 
 # ---- synthetic to real (notebook 09): networks trained only on generated YCB-Video data -----------
 # YCBV_REAL (a BOP YCB-Video root, split YCBV_SPLIT) holds the real frames they are scored on, with the
@@ -160,6 +190,21 @@ YCBV_RESULTS := $(foreach m,$(YCBV_METHODS),$(RES)/$(YCBV_NAME)_gt_$(m).json)
 NB09_ARGS := -p TRAIN_DATA ../data/ycbv -p POSE_RUN ../$(RUNS)/pose_ycbv -p REFINER_RUN ../$(RUNS)/refiner_ycbv \
 	-p IDEAL_RUN ../$(RUNS)/pose_ycbv_ideal -p POSE_PROFILE $(P_POSE)
 NB09_NEEDS := $(RUNS)/pose_ycbv/model.pt $(RUNS)/refiner_ycbv/model.pt $(RUNS)/pose_ycbv_ideal/model.pt
+else
+# without the branch (smoke, demo): notebook 09's pipeline check, the smoke network and its refiner trained on a
+# tiny ycbv dataset (2 scenes x 3 views)
+YCBV_SMALL := data/ycbv_$(PROFILE)
+$(YCBV_SMALL)/manifest.json: | $(VENV_OK)
+	$(SIXDPOSE) generate --profile ycbv --scenes 2 --views 3 --out $(@D) --workers $(WORKERS) --no-progress
+$(RUNS)/pose_ycbv/model.pt: $(YCBV_SMALL)/manifest.json | $(VENV_OK)
+	$(SIXDPOSE) train-pose --data $(YCBV_SMALL) --out $(@D) --no-progress $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_POSE))
+$(RUNS)/refiner_ycbv/model.pt: $(RUNS)/pose_ycbv/model.pt $(YCBV_SMALL)/manifest.json | $(VENV_OK)
+	$(SIXDPOSE) train-refiner --pose $(RUNS)/pose_ycbv --data $(YCBV_SMALL) --out $(@D) --no-progress \
+	  $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_POSE))
+YCBV_STAGES := $(YCBV_SMALL)/manifest.json $(RUNS)/pose_ycbv/model.pt $(RUNS)/refiner_ycbv/model.pt
+NB09_ARGS := -p TRAIN_DATA ../$(YCBV_SMALL) -p POSE_RUN ../$(RUNS)/pose_ycbv -p REFINER_RUN ../$(RUNS)/refiner_ycbv \
+	-p POSE_PROFILE $(P_POSE)
+NB09_NEEDS := $(RUNS)/pose_ycbv/model.pt $(RUNS)/refiner_ycbv/model.pt
 endif
 
 # ---- LM-O (Table I): only with LMO=/path/to/lmo (a full BOP LM-O with depth and masks) ----------
@@ -198,16 +243,19 @@ $(EXEC)/01_generate_dataset.ipynb: notebooks/01_generate_dataset.ipynb $(TRAIN_D
 $(EXEC)/02_dataset_overview.ipynb: notebooks/02_dataset_overview.ipynb $(TRAIN_DIR)/manifest.json | $(VENV_OK)
 	$(call papermill,$<,-p PROFILE $(P_TRAIN_GEN) -p DATA ../$(TRAIN_DIR) $(NB_FIG))
 
-$(EXEC)/03_train_segmentation.ipynb: notebooks/03_train_segmentation.ipynb $(RUNS)/seg/model.pt | $(VENV_OK)
-	$(call papermill,$<,-p PROFILE $(PROFILE) -p DATA ../$(TRAIN_DIR) -p RUN_DIR ../$(RUNS)/seg -p SEG_PROFILE $(P_SEG) $(NB_FIG))
+$(EXEC)/03_train_segmentation.ipynb: notebooks/03_train_segmentation.ipynb $(RUNS)/seg/model.pt $(RUNS)/seg/pred_test/meta.json \
+	| $(VENV_OK)
+	$(call papermill,$<,-p PROFILE $(PROFILE) -p DATA ../$(TRAIN_DIR) -p RUN_DIR ../$(RUNS)/seg $(NB_FIG))
 
-# notebook 04 compares the hybrid methods itself on a few training-data images (the masks notebook 03
-# predicted on its held-out images); Tables II and III come from the graph's results (notebook 07)
-$(EXEC)/04_hybrid_registration.ipynb: notebooks/04_hybrid_registration.ipynb $(EXEC)/03_train_segmentation.ipynb | $(VENV_OK)
+# notebook 04 compares the hybrid methods itself on a few training-data images (the masks segment predicted
+# on the seg run's held-out images); Tables II and III come from the graph's results (notebook 07)
+$(EXEC)/04_hybrid_registration.ipynb: notebooks/04_hybrid_registration.ipynb $(TRAIN_DIR)/manifest.json \
+	$(RUNS)/seg/pred_test/meta.json | $(VENV_OK)
 	$(call papermill,$<,-p PROFILE $(P_TRAIN_GEN) -p DATA ../$(TRAIN_DIR) -p PRED_DIR ../$(RUNS)/seg/pred_test \
 	  -p MAX_IMAGES $(P_NB04) -p WORKERS $(WORKERS) $(NB_FIG))
 
-$(EXEC)/05_train_pose_network.ipynb: notebooks/05_train_pose_network.ipynb $(RUNS)/pose/model.pt $(DATA_test)/manifest.json | $(VENV_OK)
+$(EXEC)/05_train_pose_network.ipynb: notebooks/05_train_pose_network.ipynb $(RUNS)/pose/model.pt $(DATA_test)/manifest.json \
+	$(ABLATION_RESULT) | $(VENV_OK)
 	$(call papermill,$<,-p PROFILE $(PROFILE) -p DATA ../$(TRAIN_DIR) -p TEST_DATA ../$(DATA_test) -p RUN_DIR ../$(RUNS)/pose \
 	  -p POSE_PROFILE $(P_POSE) -p RESULTS ../$(RES) $(NB_FIG))
 
@@ -215,19 +263,22 @@ $(EXEC)/06_train_refiner.ipynb: notebooks/06_train_refiner.ipynb $(RUNS)/refiner
 	$(call papermill,$<,-p PROFILE $(PROFILE) -p DATA ../$(TRAIN_DIR) -p TEST_DATA ../$(DATA_test) -p POSE_RUN ../$(RUNS)/pose \
 	  -p RUN_DIR ../$(RUNS)/refiner -p REFINER_PROFILE $(P_POSE) $(NB_FIG))
 
-$(EXEC)/08_real_data.ipynb: notebooks/08_real_data.ipynb $(TRAIN_DIR)/manifest.json $(DATA_test)/manifest.json | $(VENV_OK)
-	$(call papermill,$<,-p PROFILE $(PROFILE) -p WORKERS $(WORKERS) $(NB_FIG))
+# notebook 08: the hybrid methods on the real frames of YCBV_REAL, and the sensor-noise rows (results/P/
+# test_gt_<m> beside test_kinect_gt_<m>)
+$(EXEC)/08_real_data.ipynb: notebooks/08_real_data.ipynb $(KINECT_RESULTS) $(KINECT_METHODS:%=$(RES)/test_gt_%.json) | $(VENV_OK)
+	$(call papermill,$<,-p PROFILE $(PROFILE) -p WORKERS $(WORKERS) -p RESULTS ../$(RES) -p SENSOR_METHODS "$(KINECT_METHODS)" \
+	  $(NB_FIG))
 
 # notebook 07 reads results/P/ only (and, for Fig. 7, the results CSV and dataset a result names)
 TEX_OUT := $(addprefix $(GEN)/,macros.tex table1.tex table2.tex table3.tex table_dataset.tex table_real.tex table_ablation.tex \
 	$(foreach s,$(SPLITS),$(foreach k,$(MASKS),per_object_$(s)_$(k).tex)))
 FIG_OUT := $(addprefix $(FIG)/,fig7.png accuracy_threshold.png table1.csv table2.csv table3.csv)
-# (and the beyond-the-paper tables: the synthetic-to-real results and notebook 05's ablation result)
+# (and the beyond-the-paper tables: the synthetic-to-real results and the ablation result, in RESULTS)
 $(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT) &: notebooks/07_evaluation.ipynb $(RESULTS) $(YCBV_RESULTS) \
-	$(EXEC)/02_dataset_overview.ipynb $(EXEC)/05_train_pose_network.ipynb | $(VENV_OK)
+	$(EXEC)/02_dataset_overview.ipynb | $(VENV_OK)
 	$(call papermill,$<,-p PROFILE $(PROFILE) -p RESULTS ../$(RES) -p TEX ../$(GEN) -p TRAIN_DATA ../$(TRAIN_DIR) $(NB_FIG))
 
-# notebook 09: the synthetic-to-real networks of the YCBV branch (or, without it, its own smoke network)
+# notebook 09: the synthetic-to-real networks of the YCBV branch (or, without it, the smoke network and refiner of data/ycbv_$(PROFILE))
 $(EXEC)/09_synthetic_to_real.ipynb: notebooks/09_synthetic_to_real.ipynb $(NB09_NEEDS) | $(VENV_OK)
 	$(call papermill,$<,-p PROFILE $(PROFILE) -p WORKERS $(WORKERS) -p BOP_DATA $(abspath $(YCBV_REAL)) \
 	  -p BOP_SPLIT $(YCBV_SPLIT) $(NB09_ARGS) $(NB_FIG))

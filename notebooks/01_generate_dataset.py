@@ -2,6 +2,10 @@
 # # 01 · Generate the synthetic dataset (paper section III)
 #
 # Drake drops 5-20 target and 5-10 noise YCB objects on a table (some beyond its edge), simulates the physics until everything rests, and renders 20 RGB-D views along a random camera arc. The output follows the paper's layout (section III-C); see `sixdpose.datasets.synthetic`.
+#
+# `make` generates the dataset (`sixdpose generate --profile PROFILE --out DATA`, one rule per generator
+# profile of the graph; an interrupted run resumes, completed scenes are kept); this notebook shows it. A
+# missing dataset stops it with the make target that writes it.
 
 # %% tags=["parameters"]
 # Parameters: plain values only (papermill overrides them). None means "from the environment / the profile",
@@ -9,16 +13,16 @@
 PROFILE = None  # a generator profile: smoke (CI), demo (laptop CPU), train / test / test_single (the cpu graph), paper (GPU machine, 25,000 images)
 DATA = None  # None: $SIXDPOSE_DATA, else ../data/<PROFILE>
 FIGURES = "../figures"
-SCENES = None  # None: the profile's number of scenes
-VIEWS = None
-SEED = None  # None: the profile's seed
-WORKERS = 2
+WORKERS = 2  # unused (the generator's workers are make's WORKERS)
 
 # %%
 import os
 
 PROFILE = PROFILE or os.environ.get("SIXDPOSE_PROFILE", "smoke")
 DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{PROFILE}"
+# the `make reproduce` profile whose graph generates the generator profile PROFILE
+GRAPH_PROFILE = {"train": "cpu", "test": "cpu", "test_single": "cpu", "val": "cpu"}.get(PROFILE, PROFILE)
+import json
 from pathlib import Path
 
 import matplotlib
@@ -27,18 +31,17 @@ import matplotlib.pyplot as plt
 
 from sixdpose.datasets import open_dataset
 from sixdpose.datasets.viz import plot_views
-from sixdpose.generation import generate, profile
+from sixdpose.graph import require_dataset
 
 Path(FIGURES).mkdir(parents=True, exist_ok=True)
 
 # %% [markdown]
-# Generate (or finish an interrupted run: completed scenes are kept).
+# The dataset's manifest (written last by `sixdpose generate`: the config, the images, the objects).
 
 # %%
-cfg = profile(PROFILE, scenes=SCENES, views=VIEWS, seed=SEED)
-summary = generate(DATA, cfg, workers=WORKERS)
-print({k: v for k, v in summary.items() if k != "manifest"})
-assert not summary["scenes_failed"], summary["scenes_failed"]
+require_dataset(DATA, GRAPH_PROFILE)
+manifest = json.loads(Path(DATA, "manifest.json").read_text())
+{k: v for k, v in manifest.items() if k != "config"}
 
 # %% [markdown]
 # One scene's views with the target instance masks (noise objects carry no annotation).

@@ -16,6 +16,8 @@ import os
 
 PROFILE = PROFILE or os.environ.get("SIXDPOSE_PROFILE", "smoke")
 DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{PROFILE}"
+# the `make reproduce` profile whose graph generates the generator profile PROFILE
+GRAPH_PROFILE = {"train": "cpu", "test": "cpu", "test_single": "cpu", "val": "cpu"}.get(PROFILE, PROFILE)
 from pathlib import Path
 
 import matplotlib
@@ -27,9 +29,9 @@ from sixdpose.artifacts.tables import write_table
 from sixdpose.datasets import open_dataset
 from sixdpose.datasets.stats import claims_table, dataset_statistics, plot_statistics
 from sixdpose.datasets.viz import plot_gt_projection, plot_views
-from sixdpose.generation import ensure_dataset
+from sixdpose.graph import require_dataset
 
-ensure_dataset(DATA, profile=PROFILE)
+require_dataset(DATA, GRAPH_PROFILE)
 ds = open_dataset(DATA)
 Path(FIGURES).mkdir(parents=True, exist_ok=True)
 rng = np.random.default_rng(SEED)

@@ -1,10 +1,11 @@
 # %% [markdown]
 # # 03 · Instance segmentation with Mask R-CNN (paper §II-B, §IV-A)
 #
-# Trains torchvision's Mask R-CNN (ResNet-FPN backbone) on the dataset's target objects, or loads an
-# existing run, then shows the loss curve, predicted masks next to the ground truth on held-out images,
-# and the COCO mask/box AP table. All logic lives in `sixdpose.segmentation`; the same steps on the
-# command line are `sixdpose train-seg`, `sixdpose segment`, `sixdpose eval-seg`.
+# Shows the run of torchvision's Mask R-CNN (ResNet-FPN backbone) that `make` trained on the dataset's
+# target objects (`sixdpose train-seg`) and the masks it predicted on its held-out images (`sixdpose segment
+# --subset test`, `RUN_DIR/pred_test`): the loss curve, predicted masks next to the ground truth, and the
+# COCO mask/box AP table (`sixdpose eval-seg`). The notebook trains and predicts nothing: a missing run or
+# prediction directory stops it with the make target that writes it (`make reproduce PROFILE=...` makes all).
 #
 # * `PROFILE = "smoke"` (default): small images and backbone, a few minutes on a CPU (CI).
 # * `PROFILE = "cpu"`: the smoke network at 320 px for 2 epochs on `sixdpose generate --profile train`
@@ -19,8 +20,7 @@
 PROFILE = None  # smoke (CI), demo (laptop CPU), cpu (2-core CPU, the train split), paper (GPU machine, 25,000 images)
 DATA = None  # None: $SIXDPOSE_DATA, else ../data/<PROFILE> (cpu: ../data/train)
 FIGURES = "../figures"
-RUN_DIR = None  # None: ../runs/seg_<PROFILE>
-SEG_PROFILE = None  # Mask R-CNN profile; None: the profile of the same name (smoke for demo)
+RUN_DIR = None  # None: ../runs/<PROFILE>/seg (the graph's run)
 
 # %%
 import os
@@ -28,27 +28,29 @@ import os
 PROFILE = PROFILE or os.environ.get("SIXDPOSE_PROFILE", "smoke")
 GEN_PROFILE = {"cpu": "train"}.get(PROFILE, PROFILE)  # generator profile of the data
 DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{GEN_PROFILE}"
-RUN_DIR = RUN_DIR or f"../runs/seg_{PROFILE}"
-SEG_PROFILE = SEG_PROFILE or ("smoke" if PROFILE in ("smoke", "demo") else PROFILE)
+RUN_DIR = RUN_DIR or f"../runs/{PROFILE}/seg"
+import json
+
 import matplotlib.pyplot as plt
 
-from sixdpose.generation import ensure_dataset
+from sixdpose.graph import require, require_dataset, require_run
+from sixdpose.segmentation.config import SegConfig
 from sixdpose.segmentation.evaluate import evaluate
-from sixdpose.segmentation.infer import segment
 from sixdpose.segmentation.plots import ap_table_text, plot_loss, plot_predictions
-from sixdpose.segmentation.train import ensure_trained
 
-ensure_dataset(DATA, profile=GEN_PROFILE)
+require_dataset(DATA, PROFILE)
+require_run(RUN_DIR, PROFILE, "the Mask R-CNN run")
+PRED = f"{RUN_DIR}/pred_test"
+require(f"{PRED}/meta.json", "the predicted masks of the run's held-out images", PROFILE)
 
 # %% [markdown]
-# ## Training (or loading an existing run)
+# ## Training
 #
-# `RUN_DIR` holds the config, the split, the dataset manifest, per-epoch checkpoints and `metrics.csv`;
-# an interrupted run is resumed, a finished one is loaded.
+# `RUN_DIR` holds the config, the split, the dataset manifest, per-epoch checkpoints and `metrics.csv`
+# (`sixdpose train-seg`; an interrupted run is resumed by the same make target).
 
 # %%
-summary = ensure_trained(DATA, RUN_DIR, profile=SEG_PROFILE, progress=False)
-summary
+SegConfig.load(f"{RUN_DIR}/config.json")
 
 # %%
 plot_loss(RUN_DIR, out=f"{FIGURES}/seg_loss_{PROFILE}.png")
@@ -60,9 +62,8 @@ plt.show()
 # Left: ground-truth visible masks; right: predicted masks with score ≥ 0.5 (colour = object).
 
 # %%
-PRED = f"{RUN_DIR}/pred_test"
-result = segment(DATA, RUN_DIR, PRED, subset="test", progress=False)
-print(result)
+meta = json.loads(open(f"{PRED}/meta.json").read())
+print(f"{len(meta['images'])} held-out image(s) segmented ({PRED})")
 plot_predictions(DATA, PRED, n=3, out=f"{FIGURES}/seg_examples_{PROFILE}.png")
 plt.show()
 

@@ -11,7 +11,7 @@
 PROFILE = None  # smoke (CI), demo (laptop CPU), paper (GPU machine, 25,000 images)
 DATA = None  # None: $SIXDPOSE_DATA, else ../data/<PROFILE>
 FIGURES = "../figures"
-PRED_DIR = "auto"  # predicted masks of notebook 03; "auto": ../runs/seg_<PROFILE>/pred_test if it exists; None: GT only
+PRED_DIR = "auto"  # predicted masks shown in notebook 03; "auto": ../runs/<PROFILE>/seg/pred_test if it exists; None: GT only
 SPLIT = "test"
 PRESET = "default"
 MAX_IMAGES = None  # images registered per method; None: smoke 3 (< 2 min), demo 6, paper all
@@ -23,8 +23,10 @@ import os
 PROFILE = PROFILE or os.environ.get("SIXDPOSE_PROFILE", "smoke")
 DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{PROFILE}"
 if PRED_DIR == "auto":
-    PRED_DIR = f"../runs/seg_{PROFILE}/pred_test"
+    PRED_DIR = f"../runs/{PROFILE}/seg/pred_test"
 MAX_IMAGES = MAX_IMAGES or {"smoke": 3, "demo": 6}.get(PROFILE)
+# the `make reproduce` profile whose graph generates the generator profile PROFILE
+GRAPH_PROFILE = {"train": "cpu", "test": "cpu", "test_single": "cpu", "val": "cpu"}.get(PROFILE, PROFILE)
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -33,11 +35,11 @@ from sixdpose.artifacts.predictions import list_predictions
 from sixdpose.artifacts.tables import write_table
 from sixdpose.datasets import open_dataset
 from sixdpose.evaluation.visualize import plot_cases
-from sixdpose.generation import ensure_dataset
+from sixdpose.graph import require_dataset
 from sixdpose.registration import get_preset
 from sixdpose.reporting.compare import compare_methods, hybrid_methods
 
-ensure_dataset(DATA, profile=PROFILE)
+require_dataset(DATA, GRAPH_PROFILE)
 ds = open_dataset(DATA, split=SPLIT)
 figures = Path(FIGURES)
 figures.mkdir(parents=True, exist_ok=True)

@@ -1,11 +1,12 @@
 # %% [markdown]
 # # 05 · Learned pose network (paper section IV-C)
 #
-# Trains the DenseFusion-like network of the paper (PSPNet/ResNet-18 colour embedding without
+# Shows the DenseFusion-like network of the paper (PSPNet/ResNet-18 colour embedding without
 # normalisation layers, PointNet geometry branch, per-point fusion, attention pooling, ADD / chamfer loss)
-# or loads an existing run, then shows the training curve, the ADD(-S) accuracy per object on held-out
-# images and estimated poses over the images (Fig. 7). The logic lives in `sixdpose.pose`; the same steps
-# on the command line are `sixdpose train-pose` and `sixdpose predict-pose`.
+# that `make` trained (`sixdpose train-pose`): the training curve, the ADD(-S) accuracy per object on
+# held-out images and estimated poses over the images (Fig. 7), then the ablation result of
+# `sixdpose pose-ablation` (results/<profile>/pose_ablation_<profile>.json). The notebook trains nothing and
+# writes no result: a missing run or result stops it with the make target that writes it.
 #
 # * `smoke` (CI) and `demo`: the smoke network on a few images, a pipeline check (its accuracy means nothing).
 # * For results: `POSE_PROFILE = "cpu"` (2 hours on this machine with the refiner, on
@@ -17,12 +18,9 @@
 PROFILE = None  # smoke (CI), demo (laptop CPU), cpu (2 h on a 2-core CPU: train / val / test splits), paper (GPU)
 DATA = None  # training data; None: $SIXDPOSE_DATA, else ../data/<PROFILE> (cpu: ../data/train)
 TEST_DATA = None  # held-out data; None: the training data's images (smoke, demo: a pipeline check), else ../data/test
-RUN_DIR = None  # None: ../runs/pose_<PROFILE>
-POSE_PROFILE = None  # None: the pose profile of the same name (smoke for demo)
+RUN_DIR = None  # None: ../runs/<PROFILE>/pose (the graph's run)
+POSE_PROFILE = None  # the pose profile of the run, for the titles; None: the pose profile of the same name (smoke for demo)
 TEST_IMAGES = None  # images predicted; None: smoke 4, demo 6, else all
-ABLATION_VAL = None  # held-out split of the ablation (never test); None: TEST_DATA at smoke/demo, else ../data/val
-ABLATION_EPOCHS = None  # epochs of training per variant; None: smoke/demo 3, cpu 1 (ignored when ABLATION_BUDGET is set)
-ABLATION_BUDGET = None  # seconds of training per variant instead of epochs; None: paper 1200, else unused
 FIGURES = "../figures"
 RESULTS = None  # result artifacts; None: ../results/<PROFILE> (the graph's, gitignored for smoke and demo)
 
@@ -34,42 +32,33 @@ SMALL = PROFILE in ("smoke", "demo")
 GEN_PROFILE = {"cpu": "train"}.get(PROFILE, PROFILE)  # generator profile of the training data
 DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{GEN_PROFILE}"
 TEST_DATA = TEST_DATA or (DATA if SMALL else "../data/test")
-RUN_DIR = RUN_DIR or f"../runs/pose_{PROFILE}"
+RUN_DIR = RUN_DIR or f"../runs/{PROFILE}/pose"
 POSE_PROFILE = POSE_PROFILE or ("smoke" if SMALL else PROFILE)
 TEST_IMAGES = TEST_IMAGES or {"smoke": 4, "demo": 6}.get(PROFILE, 0)
-ABLATION_VAL = ABLATION_VAL or (TEST_DATA if SMALL else "../data/val")
-if ABLATION_BUDGET is None and PROFILE == "paper":
-    ABLATION_BUDGET = 1200
-ABLATION_EPOCHS = ABLATION_EPOCHS or (3 if SMALL else 1)
 RESULTS = RESULTS or f"../results/{PROFILE}"
 from pathlib import Path
 
 import matplotlib.pyplot as plt
+import pandas as pd
 
-from sixdpose.artifacts.results import write_result
+from sixdpose.artifacts.results import read_result
 from sixdpose.artifacts.tables import write_table
 from sixdpose.datasets import open_dataset
 from sixdpose.evaluation.evaluate import evaluate
 from sixdpose.evaluation.visualize import plot_cases
-from sixdpose.generation import ensure_dataset
-from sixdpose.pose.ablation import run_ablation
+from sixdpose.graph import require, require_dataset, require_run
 from sixdpose.pose.infer import predict_dataset
 from sixdpose.pose.plots import plot_training
-from sixdpose.pose.train import ensure_trained
 
-ensure_dataset(DATA, profile=GEN_PROFILE)
-if not SMALL:
-    ensure_dataset(TEST_DATA, profile="test")  # seed 300: never trained or tuned on
-    ensure_dataset(ABLATION_VAL, profile="val")
+require_dataset(TEST_DATA, PROFILE)  # seed 300: never trained or tuned on
+require_run(RUN_DIR, PROFILE, "the pose network")
+ABLATION = Path(RESULTS, f"pose_ablation_{PROFILE}.json")
+require(ABLATION, "the ablation result", PROFILE)
 figures = Path(FIGURES)
 figures.mkdir(parents=True, exist_ok=True)
 
 # %% [markdown]
-# ## Training (or loading an existing run)
-
-# %%
-summary = ensure_trained("pose", DATA, RUN_DIR, profile=POSE_PROFILE)
-summary
+# ## Training
 
 # %%
 plot_training(RUN_DIR, out=figures / f"pose_training_{PROFILE}.png", title=f"pose network ({POSE_PROFILE} profile)")
@@ -103,14 +92,12 @@ plt.show()
 # translation as an offset from the masked cloud's centroid, a continuous 6D rotation, and group or batch
 # normalisation put back (the paper's claim is that they hurt). Scored on `val`, never on `test`.
 # The budget is the same number of epochs (steps) per variant, with each one's training seconds beside
-# it; on a machine of its own, `ABLATION_BUDGET` gives every variant the same seconds instead.
+# it; on the paper's machine every variant gets the same seconds instead (mk/profiles.mk, `ABLATION_<profile>`).
+# `sixdpose pose-ablation` wrote the result; make runs it (`make results/<profile>/pose_ablation_<profile>.json`).
 
 # %%
-budget = {"time_budget": ABLATION_BUDGET} if ABLATION_BUDGET else {"epochs": ABLATION_EPOCHS}
-ablation = run_ablation(DATA, ABLATION_VAL, f"{RUN_DIR}_ablation", profile=POSE_PROFILE, val_images=TEST_IMAGES, **budget)
+ablation_result = read_result(ABLATION)
+print(ablation_result.description)
+ablation = pd.DataFrame(ablation_result.rows)
 write_table(ablation, list(ablation.columns), figures / f"pose_ablation_{PROFILE}.csv", figures / f"pose_ablation_{PROFILE}.tex")
-# the result artifact results/<profile>/pose_ablation_<profile>.json (+ .csv), with its provenance (the write-up's table)
-write_result(f"pose_ablation_{PROFILE}", ablation, units={"train_seconds": "s", "val_add": "%", "n_val": "GT instances"},
-             description=f"pose ablation: each variant trained on {DATA} ({budget}), ADD(-S) on {ABLATION_VAL} "
-                         "(GT masks, >= 400 visible px)", config={"profile": POSE_PROFILE, **budget}, results_dir=RESULTS)
 ablation

@@ -1,10 +1,11 @@
 # %% [markdown]
 # # 06 · Iterative refinement (paper section IV-C.5)
 #
-# Trains the refiner on the main network of notebook 05 (its poses perturbed during training: rotation
-# N(0, 15 deg) about a random axis, translation N(0, 2 cm) per axis), then measures ADD(-S) against the
-# number of refinement iterations (0-4; the paper uses 2) and shows refined poses over the images. Command
-# line: `sixdpose train-refiner`, `sixdpose predict-pose --refiner RUN --iterations K`.
+# Shows the refiner `make` trained on the main network of notebook 05 (`sixdpose train-refiner`; its poses
+# perturbed during training: rotation N(0, 15 deg) about a random axis, translation N(0, 2 cm) per axis),
+# then measures ADD(-S) against the number of refinement iterations (0-4; the paper uses 2) and shows
+# refined poses over the images. Command line: `sixdpose predict-pose --refiner RUN --iterations K`. The
+# notebook trains nothing: a missing run stops it with the make target that trains it.
 
 # %% tags=["parameters"]
 # Parameters: plain values only (papermill overrides them). None means "from the environment / the profile",
@@ -12,9 +13,9 @@
 PROFILE = None  # smoke (CI), demo (laptop CPU), cpu (2 h on a 2-core CPU: train / test splits), paper (GPU)
 DATA = None  # training data; None: $SIXDPOSE_DATA, else ../data/<PROFILE> (cpu: ../data/train)
 TEST_DATA = None  # held-out data; None: the training data's images (smoke, demo: a pipeline check), else ../data/test
-POSE_RUN = None  # None: ../runs/pose_<PROFILE> (notebook 05)
-RUN_DIR = None  # None: ../runs/refiner_<PROFILE>
-REFINER_PROFILE = None  # None: the refiner profile of the same name (smoke for demo)
+POSE_RUN = None  # None: ../runs/<PROFILE>/pose (notebook 05)
+RUN_DIR = None  # None: ../runs/<PROFILE>/refiner
+REFINER_PROFILE = None  # the refiner's profile, for the titles; None: the refiner profile of the same name (smoke for demo)
 TEST_IMAGES = None  # images predicted; None: smoke 4, demo 4, else all
 MAX_ITERATIONS = 4
 FIGURES = "../figures"
@@ -27,8 +28,8 @@ SMALL = PROFILE in ("smoke", "demo")
 GEN_PROFILE = {"cpu": "train"}.get(PROFILE, PROFILE)  # generator profile of the training data
 DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{GEN_PROFILE}"
 TEST_DATA = TEST_DATA or (DATA if SMALL else "../data/test")
-POSE_RUN = POSE_RUN or f"../runs/pose_{PROFILE}"
-RUN_DIR = RUN_DIR or f"../runs/refiner_{PROFILE}"
+POSE_RUN = POSE_RUN or f"../runs/{PROFILE}/pose"
+RUN_DIR = RUN_DIR or f"../runs/{PROFILE}/refiner"
 REFINER_PROFILE = REFINER_PROFILE or ("smoke" if SMALL else PROFILE)
 TEST_IMAGES = TEST_IMAGES or {"smoke": 4, "demo": 4}.get(PROFILE, 0)
 from pathlib import Path
@@ -40,20 +41,17 @@ from sixdpose.artifacts.tables import write_table
 from sixdpose.datasets import open_dataset
 from sixdpose.evaluation.evaluate import evaluate
 from sixdpose.evaluation.visualize import plot_cases
-from sixdpose.generation import ensure_dataset
+from sixdpose.graph import require_dataset, require_run
 from sixdpose.pose.infer import predict_dataset
 from sixdpose.pose.plots import plot_iterations, plot_training
-from sixdpose.pose.train import ensure_trained
 
-ensure_dataset(DATA, profile=GEN_PROFILE)
-if not SMALL:
-    ensure_dataset(TEST_DATA, profile="test")  # seed 300: never trained or tuned on
-ensure_trained("pose", DATA, POSE_RUN, profile=REFINER_PROFILE)  # notebook 05's run (trained here if missing)
+require_dataset(TEST_DATA, PROFILE)  # seed 300: never trained or tuned on
+require_run(POSE_RUN, PROFILE, "the pose network (notebook 05)")
+require_run(RUN_DIR, PROFILE, "the refiner")
 figures = Path(FIGURES)
 figures.mkdir(parents=True, exist_ok=True)
 
 # %%
-summary = ensure_trained("refiner", DATA, RUN_DIR, profile=REFINER_PROFILE, pose_run=POSE_RUN)
 plot_training(RUN_DIR, out=figures / f"refiner_training_{PROFILE}.png", title=f"refiner ({REFINER_PROFILE} profile)")
 plt.show()
 

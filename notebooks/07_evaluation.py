@@ -119,7 +119,7 @@ plt.show()
 # The synthetic-to-real branch of the graph (`cpu` and `paper` profiles, `make ycbv`): the learned network
 # trained only on generated YCB-Video data, scored on real Kinect frames beside the hybrid methods
 # (`ycbv_gt_*` results; notebook 09 tells the story); and the ablation of the network's choices
-# (`pose_ablation_<profile>`, notebook 05 / `sixdpose pose-ablation`).
+# (`pose_ablation_<profile>`, written by the graph's `sixdpose pose-ablation` rule; notebook 05 shows it).
 
 # %%
 real = report.write_real_table(RESULTS, figures / "table_real.csv", tex / "table_real.tex")

@@ -5,7 +5,8 @@
 # given as `BOP_DATA`), with the textured BOP models so the colour step runs: per method ADD(-S) with the
 # BOP symmetric ids, ADD-S for every object, the BOP 2019 average recall and the YCB-Video ADD-S AUC; a
 # figure of estimated poses over the real images; and what sensor noise costs on synthetic data (the same
-# split generated with the ideal depth and with the `kinect` sensor model).
+# split generated with the ideal depth and with the `kinect` sensor model): the results make wrote
+# (`results/<profile>/test_gt_<method>.json` beside `test_kinect_gt_<method>.json`).
 
 # %% tags=["parameters"]
 # Parameters: plain values only (papermill overrides them). None means "from the environment / the profile",
@@ -16,8 +17,8 @@ BOP_SPLIT = "train_real"
 SYMMETRIC_IDS = [1, 13, 14, 16, 18, 19, 20, 21]  # BOP YCB-Video symmetric objects (the sample has no annotations)
 FIGURES = "../figures"
 MAX_IMAGES = None  # real frames per method; None: smoke 4, demo 5, paper all
-SYN_PROFILE = None  # generator profile of the ideal-vs-kinect comparison; None: smoke, demo as PROFILE, else test
-SYN_IMAGES = None  # synthetic images per method (from the first scenes); None: smoke 2, demo 4, paper all
+RESULTS = None  # result artifacts of the graph; None: ../results/<PROFILE>
+SENSOR_METHODS = "ransac_icp super4pcs_icp"  # methods of the sensor-noise rows (make passes its profile's)
 WORKERS = 2
 
 # %%
@@ -26,16 +27,16 @@ import os
 PROFILE = PROFILE or os.environ.get("SIXDPOSE_PROFILE", "smoke")
 BOP_DATA = BOP_DATA or os.environ.get("SIXDPOSE_BOP") or "../../shared/data/ycbv_sample"
 MAX_IMAGES = MAX_IMAGES or {"smoke": 4, "demo": 5}.get(PROFILE)
-SYN_PROFILE = SYN_PROFILE or (PROFILE if PROFILE in ("smoke", "demo") else "test")
-SYN_IMAGES = SYN_IMAGES or {"smoke": 2, "demo": 4}.get(PROFILE)
+RESULTS = RESULTS or f"../results/{PROFILE}"
 from pathlib import Path
 
 import matplotlib.pyplot as plt
 
+from sixdpose.artifacts.results import read_result
 from sixdpose.artifacts.tables import write_table
 from sixdpose.datasets import open_dataset
 from sixdpose.evaluation.visualize import plot_cases
-from sixdpose.generation import ensure_dataset
+from sixdpose.graph import require
 from sixdpose.reporting.compare import compare_methods, hybrid_methods
 
 figures = Path(FIGURES)
@@ -80,20 +81,18 @@ plt.show()
 #
 # The same generator profile twice: ideal depth (the paper's) and the `kinect` structured-light model
 # (Gaussian pixel shift, disparity quantised to 1/8 px, holes at depth discontinuities, Nguyen et al.
-# 2012 axial noise). Masks and poses are exact in both.
+# 2012 axial noise). Masks and poses are exact in both. The graph's test split and its `kinect` twin
+# (`data/<test>_kinect`, `sixdpose generate --set sensor=kinect`), every image, GT masks, instances with
+# >= 400 visible px: `sixdpose register` + `sixdpose evaluate` write the results read here.
 
 # %%
-ideal = ensure_dataset(f"../data/{SYN_PROFILE}", profile=SYN_PROFILE, workers=WORKERS)
-# the kinect twin needs only the scenes that hold the compared images (scenes are drawn from (seed, scene))
-views = open_dataset(ideal).manifest["config"]["views"]
-scenes = -(-SYN_IMAGES // views) if SYN_IMAGES else None
-kinect = ensure_dataset(f"../data/{SYN_PROFILE}_kinect" + (f"_{scenes}scenes" if scenes else ""), profile=SYN_PROFILE,
-                        workers=WORKERS, sensor="kinect", scenes=scenes)
 rows = []
-for label, path in (("ideal", ideal), ("kinect", kinect)):
-    t, _ = compare_methods(path, hybrid_methods(workers=WORKERS, methods=("ransac", "super4pcs"), icp=(True,)),
-                           {"gt": ("gt", list(range(len(open_dataset(path))))[:SYN_IMAGES])})
-    rows += [dict(r, sensor=label) for r in t.to_dict("records")]
+for method in SENSOR_METHODS.split():
+    for label, name in (("ideal", f"test_gt_{method}"), ("kinect", f"test_kinect_gt_{method}")):
+        path = require(Path(RESULTS, f"{name}.json"), f"the result {name}", PROFILE)
+        f = read_result(path).figures
+        rows.append({"sensor": label, "method": method, "add_s": f["accuracy"], "n_gt": f["n_gt"],
+                     "instances_per_s": f["instances_per_s"]})
 write_table(rows, ["sensor", "method", "add_s", "n_gt", "instances_per_s"], figures / "sensor_noise.csv",
             figures / "sensor_noise.tex", headers=["Depth", "Method", "ADD(-S)", "GT instances", "Instances/s"])
 rows

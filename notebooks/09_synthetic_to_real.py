@@ -11,6 +11,8 @@
 #
 # Command line: `sixdpose generate --profile ycbv`, `sixdpose train-pose --profile cpu`,
 # `sixdpose predict-pose --data BOP_ROOT --split train_real`, `sixdpose evaluate --symmetric-ids ...`.
+# `make` generates the data and trains the networks (mk/reproduce.mk, the synthetic-to-real branch); the
+# notebook trains nothing: a missing dataset or run stops it with the make target that writes it.
 
 # %% tags=["parameters"]
 # Parameters: plain values only (papermill overrides them). None means "from the environment / the profile",
@@ -19,8 +21,7 @@ PROFILE = None  # smoke (CI), demo (laptop CPU), cpu (this machine, about an hou
 TRAIN_DATA = None  # generated ycbv data; None: ../data/ycbv (cpu, paper), else a tiny ../data/ycbv_<PROFILE>
 POSE_RUN = None  # None: ../runs/<PROFILE>/pose_ycbv
 REFINER_RUN = None  # None: ../runs/<PROFILE>/refiner_ycbv (trained on POSE_RUN's network)
-POSE_PROFILE = None  # None: smoke for smoke/demo, else PROFILE
-COLOUR_JITTER = 0.0  # training colour augmentation (0.3 was measured on the sample: no gain at the cpu budget)
+POSE_PROFILE = None  # the networks' profile, for the titles; None: smoke for smoke/demo, else PROFILE
 IDEAL_RUN = None  # the same network trained on the ideal-depth twin (../data/ycbv_ideal), scored beside it if trained
 BOP_DATA = None  # real frames; None: $SIXDPOSE_BOP, else ../../shared/data/ycbv_sample
 BOP_SPLIT = "train_real"
@@ -41,8 +42,6 @@ POSE_PROFILE = POSE_PROFILE or ("smoke" if SMALL else PROFILE)
 IDEAL_RUN = IDEAL_RUN or (None if SMALL else f"../runs/{PROFILE}/pose_ycbv_ideal")
 BOP_DATA = BOP_DATA or os.environ.get("SIXDPOSE_BOP") or "../../shared/data/ycbv_sample"
 MAX_IMAGES = MAX_IMAGES or {"smoke": 4, "demo": 8}.get(PROFILE)
-# cpu: the graph's fixed 6 epochs (mk/profiles.mk, YCBV_POSE_cpu) instead of the profile's 40-minute budget
-TRAINING = {"epochs": 6, "time_budget": 0} if PROFILE == "cpu" else {}
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -50,9 +49,8 @@ import matplotlib.pyplot as plt
 from sixdpose.artifacts.tables import write_table
 from sixdpose.datasets import open_dataset
 from sixdpose.evaluation.visualize import plot_cases
-from sixdpose.generation import ensure_dataset
+from sixdpose.graph import require_dataset, require_run
 from sixdpose.pose.plots import plot_training
-from sixdpose.pose.train import ensure_trained
 from sixdpose.reporting.compare import compare_methods, hybrid_methods, learned_method, per_object_table
 
 figures = Path(FIGURES)
@@ -64,13 +62,12 @@ figures.mkdir(parents=True, exist_ok=True)
 # `smoke`/`demo`: a tiny `ycbv` dataset (2 scenes x 3 views) and the smoke network, a pipeline check
 # whose accuracy means nothing. `cpu`: the full `ycbv` profile (60 scenes x 20 views, `kinect` depth), the
 # `cpu` pose network and its refiner for 6 epochs each (the `make reproduce PROFILE=cpu` graph trains them,
-# the ideal-depth twins and the networks with colour jitter).
+# the ideal-depth twins and the networks with colour jitter; mk/profiles.mk, `YCBV_POSE_cpu`).
 
 # %%
-small = {"scenes": 2, "views": 3} if SMALL else {}
-ensure_dataset(TRAIN_DATA, profile="ycbv", workers=WORKERS, **small)
-summary = ensure_trained("pose", TRAIN_DATA, POSE_RUN, profile=POSE_PROFILE, colour_jitter=COLOUR_JITTER, **TRAINING)
-ensure_trained("refiner", TRAIN_DATA, REFINER_RUN, profile=POSE_PROFILE, pose_run=POSE_RUN, **TRAINING)
+require_dataset(TRAIN_DATA, PROFILE)
+require_run(POSE_RUN, PROFILE, "the pose network trained on ycbv data")
+require_run(REFINER_RUN, PROFILE, "its refiner")
 plot_training(POSE_RUN, out=figures / f"pose_ycbv_training_{PROFILE}.png", title=f"pose network on generated ycbv data ({POSE_PROFILE})")
 plt.show()
 

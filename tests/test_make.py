@@ -38,21 +38,40 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
     seg_line = next(line for line in _lines(out, "train-seg") if f"--out runs/{profile}/seg" in line)
     # a new run gets the profile; an interrupted one (last.pt in this checkout) is resumed
     assert out.split(seg_line, 1)[1].lstrip().startswith((f"--profile {seg}", "--resume")) or "--resume" in seg_line
-    assert len(_lines(out, "segment")) == 2
+    # the held-out splits' masks, and notebook 03's predictions on the seg run's own held-out images
+    assert len(_lines(out, "segment")) == 3
+    assert f".venv/bin/sixdpose segment --data {train} --ckpt runs/{profile}/seg --subset test " \
+        f"--out runs/{profile}/seg/pred_test --no-progress" in out
     ycbv = profile in ("cpu", "paper")  # the synthetic-to-real branch: ycbv data, 6 networks + 2 refiners, 15 methods on real frames
-    poses = [line for line in _lines(out, "register") + _lines(out, "predict-pose") if "ycbv_sample" not in line]
+    kinect = f"{splits[0]}_kinect"  # the multi-instance test split again with kinect depth (notebook 08)
+    poses = [line for line in _lines(out, "register") + _lines(out, "predict-pose")
+             if "ycbv_sample" not in line and kinect not in line]
     real = [line for line in _lines(out, "register") + _lines(out, "predict-pose") if "--data ../shared/data/ycbv_sample" in line]
-    evals = [line for line in _lines(out, "evaluate") if "ycbv_sample" not in line]
+    evals = [line for line in _lines(out, "evaluate") if "ycbv_sample" not in line and kinect not in line]
     assert len(poses) == 40 and len(evals) == 40  # 10 methods x 2 splits x 2 mask sources
-    assert len(real) == (15 if ycbv else 0) and len(_lines(out, "evaluate")) == len(evals) + len(real)
+    sensor = [line for line in _lines(out, "evaluate") if f"--data {kinect} " in line]
+    assert sorted(re.search(r"--result-name (\S+)", line).group(1) for line in sensor) == \
+        ["test_kinect_gt_ransac_icp", "test_kinect_gt_super4pcs_icp"]
+    kinect_gen = f".venv/bin/sixdpose generate --profile {splits[0][5:]} --set sensor=kinect --out {kinect} "
+    assert any(line.startswith(kinect_gen) for line in _lines(out, "generate"))
+    assert len(real) == (15 if ycbv else 0) and len(_lines(out, "evaluate")) == len(evals) + len(real) + 2
     assert ({"data/ycbv", "data/ycbv_ideal"} <= gen) == ycbv
-    assert len([line for line in _lines(out, "train-pose") if "pose_ycbv" in line]) == (6 if ycbv else 0)
-    assert len([line for line in _lines(out, "train-refiner") if "refiner_ycbv" in line]) == (2 if ycbv else 0)
+    # without the branch, notebook 09's smoke network and refiner on a tiny ycbv dataset
+    assert (f"data/ycbv_{profile}" in gen) == (not ycbv)
+    assert len([line for line in _lines(out, "train-pose") if "pose_ycbv" in line]) == (6 if ycbv else 1)
+    assert len([line for line in _lines(out, "train-refiner") if "refiner_ycbv" in line]) == (2 if ycbv else 1)
+    # notebook 05's ablation: one pose-ablation command writing results/P/pose_ablation_P.json
+    ablation = re.findall(r"sixdpose pose-ablation (.*?)--result-name (\S+) --results-dir (\S+)",
+                          out.replace("\\\n", ""))
+    assert len(ablation) == 1 and ablation[0][1:] == (f"pose_ablation_{profile}", f"results/{profile}")
+    assert ("--val data/val" in ablation[0][0]) == (profile in ("cpu", "paper"))
     long = [line for line in _lines(out, "train-pose") if "_e12" in line]  # the pair trained twice as long
     assert len(long) == (2 if ycbv else 0) and all(
         ("--epochs 12" in line) == (profile == "cpu") or "--resume" in line for line in long)
     assert all(f"--results-dir results/{profile}" in line for line in _lines(out, "evaluate"))
     assert sum("--masks gt --min-px 400" in line for line in poses) == 12
+    # every notebook reads what make wrote: no notebook trains, generates or writes a result
+    assert "SEG_PROFILE" not in out
     assert len(re.findall(r"-m papermill .*notebooks/0\d_\w+\.ipynb notebooks/executed/" + profile, out)) == 9
     assert "latexmk" in out and f"-outdir=build/{profile}" in out
     # stages in the order of the pipeline: datasets, training, masks, then poses
@@ -62,7 +81,10 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
 
 def test_smoke_runs_a_few_methods_and_lmo_adds_table_1():
     out = _plan("smoke", "WITH_LATEX=1").stdout
-    assert len(_lines(out, "evaluate")) == 16 and "results/smoke/single_pred_super4pcs.json" not in out
+    # 16 = 4 methods x 2 splits x 2 mask sources, + 1 kinect row (ransac_icp: the smoke methods with ICP)
+    assert len(_lines(out, "evaluate")) == 17 and "results/smoke/single_pred_super4pcs.json" not in out
+    assert "--result-name test_kinect_gt_ransac_icp" in out and "test_kinect_gt_super4pcs_icp" not in out
+    assert "--result-name pose_ablation_smoke" in out and "--epochs 3 --val-images 4" in out
     out = _plan("reproduce", "PROFILE=cpu", "LMO=/data/lmo").stdout
     lmo = [line for line in _lines(out, "evaluate") if "--data /data/lmo" in line]
     assert len(lmo) == 12 and all("--split test" in line for line in lmo)

@@ -43,3 +43,14 @@ def test_parameters_are_literals_and_no_logic(name):
         if c.cell_type == "code":
             for node in ast.walk(ast.parse(c.source)):
                 assert not isinstance(node, (ast.FunctionDef, ast.ClassDef, ast.While)), f"{name}: logic belongs in the package"
+
+
+@pytest.mark.parametrize("name", PAIRS)
+def test_notebooks_read_what_make_writes(name):
+    """Datasets, trained networks and results of record are make targets (mk/reproduce.mk): a notebook
+    never generates a dataset, trains, or writes a result artifact (it requires them: sixdpose.graph)."""
+    import re
+
+    src = (NB / f"{name}.py").read_text() + (NB / f"{name}.ipynb").read_text()
+    found = re.findall(r"\b(write_result|generate|ensure_dataset|ensure_trained|run_ablation|segment)\(", src)
+    assert found == [], f"{name}: {sorted(set(found))} belong to a make rule (mk/reproduce.mk)"

@@ -10,7 +10,8 @@ Layers, bottom to top; a module imports only its own layer and the ones below (`
 checks this and that no import cycle exists between modules or packages):
 
 1. base: ``errors``, ``constants`` (thresholds), ``registry`` (methods, profiles), ``geometry`` (``X_from``),
-   ``schemas`` (file schemas), ``options`` (typed CLI options), ``fileio``, ``config``, ``logs``, ``runs``;
+   ``schemas`` (file schemas), ``options`` (typed CLI options), ``graph`` (the make
+   graph's files, for notebooks), ``fileio``, ``config``, ``logs``, ``runs``;
 2. readers and artifacts: ``datasets``, ``assets``, ``artifacts``;
 3. scoring: ``evaluation``;
 4. stages: ``generation``, ``segmentation``, ``registration``, ``pose`` (``pose`` uses ``registration``

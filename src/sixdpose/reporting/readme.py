@@ -33,7 +33,7 @@ from pathlib import Path
 from ..artifacts.results import Result, machine_text, read_result
 from ..errors import SixdposeError
 from ..fileio import atomic_write_text
-from ..registry import REAL_METHODS
+from ..registry import METHODS, REAL_METHODS
 from .paper import TABLES, paper_figure
 
 _OPEN = re.compile(r"^<!-- results:([A-Za-z0-9_./-]+) -->[ \t]*$", re.M)
@@ -179,6 +179,29 @@ def _depth_noise(src: Source) -> str:
         "\n\ninst/s: from the results CSVs' per-image times (`register --workers 2` sharing the 2-core CPU)."
 
 
+#: The hybrid methods of the ``cpu`` graph on ``data/test`` with GT masks: (label, paper key, method); a row
+#: is shown when ``results/cpu/test_gt_<method>.json`` exists (``make reproduce PROFILE=cpu`` writes all six).
+#: (label, method key) of the hybrid rows of the data/test block: the registry's hybrid methods
+HYBRID_CPU_TEST = [(m.label, m.key) for m in METHODS if m.kind == "hybrid"]
+
+
+def _hybrid_cpu_test(src: Source) -> str:
+    rows = []
+    for label, method in HYBRID_CPU_TEST:
+        name = f"cpu/test_gt_{method}"
+        if not src.exists(name):
+            continue
+        f = src(name).figures
+        pf = paper_figure("III", method)
+        rows.append([label, fmt(pf) if pf is not None else "",
+                     f"{fmt(f['accuracy'])} ({f['n_correct']}/{f['n_gt']})", f["n_images"], f["instances_per_s"]])
+    missing = [label for label, method in HYBRID_CPU_TEST if not src.exists(f"cpu/test_gt_{method}")]
+    note = (f"\n\nNot in `results/cpu/` yet (`make reproduce PROFILE=cpu` writes them): {', '.join(missing)}."
+            if missing else "")
+    return md_table(["method", f"{_T3.citation} ADD(-S) %", "`data/test` ADD(-S) % (correct/GT)", "images",
+                     "inst/s (`register --workers 2`)"], rows) + note
+
+
 def _ycbv_bop(src: Source) -> str:
     r = src("cpu/ycbv_gt_ransac_icp")
     f, b = r.figures, r.figures.get("bop") or {}
@@ -232,6 +255,7 @@ BLOCKS = {
     "learned_cpu_summary": _learned_cpu_summary,
     "learned_cpu_per_object": _learned_cpu_per_object,
     "depth_noise": _depth_noise,
+    "hybrid_cpu_test": _hybrid_cpu_test,
     "ycbv_bop": _ycbv_bop,
 }
 

@@ -9,7 +9,10 @@ Reported: mask and box AP (IoU 0.50:0.95), AP50, AP75, over all classes and per 
 ground-truth instance in the evaluated images has an undefined AP: it is reported as NaN (``--`` in
 LaTeX), said in one log line, and excluded from the mean (pycocotools' convention).
 
-Written by :func:`write_tables` to the output directory: ``seg_ap<tag>.csv`` and ``seg_ap<tag>.tex``.
+Written by :func:`write_tables` to the output directory: ``seg_ap<tag>.csv`` and ``seg_ap<tag>.tex``,
+each atomically (:mod:`sixdpose.fileio`). The output directory is shared (a figures directory, a run
+directory), so the files are claimed one by one: an existing file of that name is replaced only if it is
+a table of ours (recognised by its first line), otherwise the evaluation is refused before any work.
 """
 
 from __future__ import annotations
@@ -24,16 +27,23 @@ from pathlib import Path
 
 import numpy as np
 
-from ..datasets.base import DatasetError
-from ..datasets.readers import open_dataset
-from .data import ClassMap
 from ..artifacts.predictions import (check_predictions_dataset, read_coco_results, read_predictions,
                                      read_predictions_meta)
+from ..artifacts.tables import tex_escape
+from ..datasets.base import DatasetError
+from ..datasets.readers import open_dataset
+from ..errors import OutputError
+from ..fileio import atomic_write_text, claim_output_file
+from .data import ClassMap
 from .infer import coco_image_id, encode_rle
 
 log = logging.getLogger("sixdpose.segmentation")
 
 METRICS = ("AP", "AP50", "AP75")
+#: The columns of ``seg_ap<tag>.csv`` (its header line) and the first line of ``seg_ap<tag>.tex``: an
+#: existing file is recognised as ours by them.
+CSV_COLUMNS = ["obj_id", "name", "n_gt"] + [f"{t}_{m}" for t in ("mask", "box") for m in METRICS]
+TEX_FIRST_LINE = r"\begin{tabular}{lr|rrr|rrr}"
 
 
 def coco_ground_truth(samples, classes: ClassMap) -> tuple[dict, dict]:
@@ -190,7 +200,11 @@ def evaluate(data: str | Path, pred_dir: str | Path, out_dir: str | Path | None 
         The dict of :func:`coco_evaluate` (plus ``files`` when written).
     Raises:
         DatasetError: missing/malformed predictions, or images of ``meta.json`` not in the dataset.
+        OutputError: ``out_dir`` is a file, or holds a ``seg_ap<tag>`` file that is not ours (checked
+            before any work; nothing is written).
     """
+    if out_dir is not None:
+        claim_tables(out_dir, tag)
     pred_dir = Path(pred_dir)
     ds, meta, index = open_segmented(data, pred_dir)
     classes = ClassMap.from_list(meta["classes"])
@@ -220,34 +234,55 @@ def evaluate(data: str | Path, pred_dir: str | Path, out_dir: str | Path | None 
     return metrics
 
 
+def table_paths(out_dir: str | Path, tag: str = "") -> tuple[Path, Path]:
+    """The two files of :func:`write_tables`: ``out_dir/seg_ap<tag>.csv`` and ``.tex``."""
+    out_dir = Path(out_dir)
+    return out_dir / f"seg_ap{tag}.csv", out_dir / f"seg_ap{tag}.tex"
+
+
+def claim_tables(out_dir: str | Path, tag: str = "") -> None:
+    """Check that the tables of :func:`write_tables` may be written into ``out_dir`` (nothing is written).
+
+    Accepted: a directory that does not exist yet or is writable, where ``seg_ap<tag>.csv`` / ``.tex`` are
+    absent or earlier tables of ours (their first lines are :data:`CSV_COLUMNS` / :data:`TEX_FIRST_LINE`).
+
+    Raises:
+        OutputError: ``out_dir`` is a file, or one of the two files exists and is not ours.
+    """
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise OutputError(f"{out_dir}: exists and is not a directory (the output directory of the AP tables)")
+    csv_path, tex_path = table_paths(out_dir, tag)
+    claim_output_file(csv_path, ",".join(CSV_COLUMNS))
+    claim_output_file(tex_path, TEX_FIRST_LINE)
+
+
 def write_tables(metrics: dict, out_dir: str | Path, tag: str = "") -> list[Path]:
-    """Write the AP table of :func:`coco_evaluate` as CSV and LaTeX into ``out_dir``.
+    """Write the AP table of :func:`coco_evaluate` as CSV and LaTeX into ``out_dir``, atomically.
 
     Rows: one per class and a final ``all`` row; columns mask AP/AP50/AP75 and box AP/AP50/AP75 in
     percent (CSV: fractions with 4 decimals; LaTeX: percent with 1 decimal, ``--`` for undefined).
+
+    Raises:
+        OutputError: see :func:`claim_tables` (checked before either file is written).
     """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    cols = [f"{t}_{m}" for t in ("mask", "box") for m in METRICS]
+    claim_tables(out_dir, tag)
+    csv_path, tex_path = table_paths(out_dir, tag)
+    cols = CSV_COLUMNS[3:]
     rows = [dict(r) for r in metrics["per_class"]]
     overall = {"obj_id": "", "name": "all", "n_gt": metrics["n_gt"]}
     for t in ("mask", "box"):
         for m in METRICS:
             overall[f"{t}_{m}"] = metrics["overall"][t][m]
     rows.append(overall)
-    csv_path = out_dir / f"seg_ap{tag}.csv"
-    with open(csv_path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["obj_id", "name", "n_gt"] + cols)
-        for r in rows:
-            w.writerow([r["obj_id"], r["name"], r["n_gt"]] + [_fmt(r[c], 4, 1.0, "nan") for c in cols])
+    buf = io.StringIO(newline="")
+    w = csv.writer(buf, lineterminator="\r\n")
+    w.writerow(CSV_COLUMNS)
+    for r in rows:
+        w.writerow([r["obj_id"], r["name"], r["n_gt"]] + [_fmt(r[c], 4, 1.0, "nan") for c in cols])
 
-    def tex_escape(s: str) -> str:
-        return str(s).replace("\\", r"\textbackslash{}").replace("_", r"\_").replace("&", r"\&").replace("%", r"\%")
-
-    tex_path = out_dir / f"seg_ap{tag}.tex"
     lines = [
-        r"\begin{tabular}{lr|rrr|rrr}",
+        TEX_FIRST_LINE,
         r"\hline",
         r" & & \multicolumn{3}{c|}{mask} & \multicolumn{3}{c}{box} \\",
         r"Object & $N_{gt}$ & AP & AP$_{50}$ & AP$_{75}$ & AP & AP$_{50}$ & AP$_{75}$ \\",
@@ -259,7 +294,8 @@ def write_tables(metrics: dict, out_dir: str | Path, tag: str = "") -> list[Path
         vals = " & ".join(_fmt(r[c], 1, 100.0, "--") for c in cols)
         lines.append(f"{tex_escape(r['name'])} & {r['n_gt']} & {vals} \\\\")
     lines += [r"\hline", r"\end{tabular}", ""]
-    tex_path.write_text("\n".join(lines))
+    atomic_write_text(csv_path, buf.getvalue())
+    atomic_write_text(tex_path, "\n".join(lines))
     return [csv_path, tex_path]
 
 
