@@ -45,8 +45,8 @@ def main(argv=None) -> None:
         per_core_wall = r["images_per_s"] / used
         per_core_cpu = r["images"] / r["cpu_seconds"] if r["cpu_seconds"] else float("nan")
         speed[sensor] = per_core_cpu
-        print(f"generation benchmark: {args.scenes} scenes x {args.views} views (paper profile config, seed {args.seed}, "
-              f"sensor {sensor}), {args.workers} workers on {cores} cores")
+        print(f"generation benchmark: {args.scenes} scenes x {args.views} views "
+              f"(paper profile config, seed {args.seed}, sensor {sensor}), {args.workers} workers on {cores} cores")
         print(f"  images                      {r['images']}")
         print(f"  wall time                   {r['seconds']:.1f} s (includes worker start-up)")
         print(f"  images/s                    {r['images_per_s']:.2f}")
@@ -61,7 +61,8 @@ def main(argv=None) -> None:
     if "ideal" in speed:
         for sensor, v in speed.items():
             if sensor != "ideal":
-                print(f"  {sensor} speed / ideal speed (images per CPU-second): {v / speed['ideal']:.3f}   [target >= 0.8]")
+                print(f"  {sensor} speed / ideal speed (images per CPU-second): "
+                      f"{v / speed['ideal']:.3f}   [target >= 0.8]")
     save_from_args(args, rows, command=script_command(__file__, argv),
                    units={"wall_s": "s", "images_per_s": "images/s", "images_per_s_per_core_wall": "images/s",
                           "images_per_cpu_second": "images/CPU-s", "peak_rss_mb_per_worker": "MB"},

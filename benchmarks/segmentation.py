@@ -4,14 +4,15 @@ Usage::
 
     python benchmarks/segmentation.py [--ckpt RUN_DIR | --profile paper|smoke] [--data DIR]
                                       [--n-images 8] [--batch-size 1] [--threads N] [--json OUT]
-                                      [--results-dir results] [--result-name segmentation_<profile or run>] [--no-result]
+                                      [--results-dir results] [--result-name segmentation_<profile or run>]
+                                      [--no-result]
 
 Without ``--ckpt`` an untrained network of the profile's architecture is timed (``paper``: ResNet-50-FPN
 at 640x480, the paper's model); its random weights give an arbitrary number of detections (often the
-maximum, 100 per image), so the post-processing cost differs from a trained run's. Without ``--data`` a toy 640x480 dataset is written
-to a temporary directory. Timings exclude reading images from disk (as in the paper, section V-A):
-images are loaded before the clock starts; the time covers the forward pass including resizing,
-post-processing and pasting the masks back at full resolution, and the copy of the results to the CPU.
+maximum, 100 per image), so the post-processing cost differs from a trained run's. Without ``--data`` a toy
+640x480 dataset is written to a temporary directory. Timings exclude reading images from disk (as in the
+paper, section V-A): images are loaded before the clock starts; the time covers the forward pass including
+resizing, post-processing and pasting the masks back at full resolution, and the copy of the results to the CPU.
 
 Peak memory: on CPU the increase of the process' peak resident set size during the timed runs (MiB;
 the model's weights are loaded before); on the GPU ``torch.cuda.max_memory_allocated``.
@@ -89,7 +90,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", help="also write the results here")
     from sixdpose.artifacts.results import add_result_arguments, save_from_args, script_command
 
-    add_result_arguments(ap, None, Path(__file__).resolve().parents[1] / "results", "segmentation_<profile or run dir name>")
+    add_result_arguments(ap, None, Path(__file__).resolve().parents[1] / "results",
+                         "segmentation_<profile or run dir name>")
     args = ap.parse_args(argv)
     if args.result_name is None:
         args.result_name = "segmentation_" + (Path(args.ckpt).resolve().name if args.ckpt else args.profile)

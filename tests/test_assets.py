@@ -13,7 +13,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sixdpose.assets import AssetError, MeshData, load_catalog, physical_properties, point_cloud_diameter, resolve_assets_dir, sample_surface
+from sixdpose.assets import (
+    AssetError,
+    MeshData,
+    load_catalog,
+    physical_properties,
+    point_cloud_diameter,
+    resolve_assets_dir,
+    sample_surface,
+)
 
 
 def _cube(size=(0.1, 0.2, 0.3)) -> MeshData:
@@ -62,7 +70,8 @@ def test_catalogue(ycb_dir):
 
     assert len(cat) == 46 and set(TARGET_OBJECTS) <= set(cat)
     # the paper's starred objects (section III-B), from the one source of the flag
-    assert {n for n, o in cat.items() if o.symmetric} == {"056_tennis_ball", "053_mini_soccer_ball", "013_apple", "029_plate"}
+    assert {n for n, o in cat.items() if o.symmetric} == {"056_tennis_ball", "053_mini_soccer_ball", "013_apple",
+                                                          "029_plate"}
 
 
 def test_resolve_errors(tmp_path, monkeypatch):
@@ -139,5 +148,6 @@ def test_fetch_failures_leave_nothing(tmp_path, server, obj, msg):
     r = _fetch(to, server, obj)
     errors = [line for line in r.stderr.splitlines() if "error:" in line]
     assert r.returncode == 2 and len(errors) == 1 and msg in errors[0]
-    leftovers = [p for p in to.rglob("*") if p.name not in ("objects.csv", ".sixdpose.json")] if to.exists() else []  # the ownership marker stays
+    # the ownership marker stays
+    leftovers = [p for p in to.rglob("*") if p.name not in ("objects.csv", ".sixdpose.json")] if to.exists() else []
     assert leftovers == []

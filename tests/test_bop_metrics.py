@@ -73,10 +73,7 @@ def _brute_vsd(depth_test, depth_est, depth_gt, delta, taus, diameter, cost_type
         return [1.0] * len(taus)
     out = []
     for tau in taus:
-        if cost_type == "step":
-            c = sum(1.0 for d in dists if d >= tau)
-        else:
-            c = sum(min(1.0, d / tau) for d in dists)
+        c = sum(1.0 for d in dists if d >= tau) if cost_type == "step" else sum(min(1.0, d / tau) for d in dists)
         out.append((c + n_union - n_inter) / n_union)
     return out
 
@@ -131,7 +128,7 @@ def test_symmetry_transformations_hand_example():
         (np.eye(3), [0.010 - 0.010, -0.020, 0]),  # pi x discrete: R td + tc
     ]
     assert len(syms) == 4
-    for (R, t), (Re, te) in zip(syms, expected):
+    for (R, t), (Re, te) in zip(syms, expected, strict=True):
         np.testing.assert_allclose(R, Re, atol=1e-12)
         np.testing.assert_allclose(t, te, atol=1e-12)
         assert t.shape == (3,)
@@ -301,7 +298,7 @@ def test_vsd_zero_for_gt_and_positive_for_shift(vsd_scene):
     assert len(e0) == len(taus) and e0 == [0.0] * len(taus)
     e1 = M.vsd(Rg, tg + [0.008, 0, 0], Rg, tg, depth, K, M.BOP19_VSD_DELTA, taus, True, diam, v, f)
     assert all(0 < e <= 1 for e in e1)
-    assert all(x >= y for x, y in zip(e1, e1[1:]))  # non-increasing in tau
+    assert all(x >= y for x, y in zip(e1, e1[1:], strict=False))  # non-increasing in tau
     # an estimate outside the image: nothing in common with the GT -> 1
     e2 = M.vsd(Rg, tg + [1.0, 0, 0], Rg, tg, depth, K, M.BOP19_VSD_DELTA, taus, True, diam, v, f)
     assert e2 == [1.0] * len(taus)

@@ -12,8 +12,16 @@ import pytest
 import yaml
 
 from sixdpose.assets import AssetError, load_mesh, sample_surface
-from sixdpose.assets.bop import (YCBV_YCB_NAMES, bake_face_colours, convert_bop_model, converted_model, list_bop_models,
-                                 mesh_volume, model_mass, DEFAULT_DENSITY_KG_M3)
+from sixdpose.assets.bop import (
+    DEFAULT_DENSITY_KG_M3,
+    YCBV_YCB_NAMES,
+    bake_face_colours,
+    convert_bop_model,
+    converted_model,
+    list_bop_models,
+    mesh_volume,
+    model_mass,
+)
 from sixdpose.constants import MERGED_MASK_CODES, TARGET_OBJECTS, merged_mask_codes
 from sixdpose.datasets.base import DatasetError
 from sixdpose.datasets.ply import read_ply, write_ply
@@ -63,9 +71,10 @@ def _textured_ply(d: Path, name="obj_000007.ply") -> Path:
     V = _box_mm()
     uv = np.c_[np.full(len(V), 0.5), np.where(V[:, 2] > 20.0, 0.9, 0.1)]
     lines = ["ply", "format ascii 1.0", "comment TextureFile tex7.png", f"element vertex {len(V)}",
-             "property float x", "property float y", "property float z", "property float texture_u", "property float texture_v",
-             f"element face {len(_BOX_F)}", "property list uchar int vertex_indices", "end_header"]
-    lines += [" ".join(f"{x:.6f}" for x in (*v, *t)) for v, t in zip(V, uv)]
+             "property float x", "property float y", "property float z", "property float texture_u",
+             "property float texture_v", f"element face {len(_BOX_F)}", "property list uchar int vertex_indices",
+             "end_header"]
+    lines += [" ".join(f"{x:.6f}" for x in (*v, *t)) for v, t in zip(V, uv, strict=True)]
     lines += ["3 " + " ".join(map(str, f)) for f in _BOX_F]
     p = d / name
     p.write_text("\n".join(lines) + "\n")
@@ -176,8 +185,10 @@ def test_resolve_ycbv_objects(tmp_path, ycb_dir, ycbv_models):
     # three of them (converting all 19 takes 10 s): given in any order and any spelling
     objs = resolve_objects(cfg.replace(target_objects=("13", "006_mustard_bottle", "obj_000001")), ycb_dir, ycbv_models,
                            cache_dir=tmp_path / "cache")
-    assert [t.obj_id for t in objs.targets] == [1, 5, 13] and objs.target_names == ["obj_000001", "obj_000005", "obj_000013"]
-    assert [t.symmetric for t in objs.targets] == [True, False, True] and objs.codes == {"obj_000001": 85, "obj_000005": 170, "obj_000013": 255}
+    assert [t.obj_id for t in objs.targets] == [1, 5, 13]
+    assert objs.target_names == ["obj_000001", "obj_000005", "obj_000013"]
+    assert [t.symmetric for t in objs.targets] == [True, False, True]
+    assert objs.codes == {"obj_000001": 85, "obj_000005": 170, "obj_000013": 255}
     target_ycb = {YCBV_YCB_NAMES[k - 1] for k in (1, 5, 13)}
     assert not target_ycb & set(objs.noise_names) and len(objs.noise_names) == 46 - 3
     mustard = objs.targets[1]
@@ -187,7 +198,8 @@ def test_resolve_ycbv_objects(tmp_path, ycb_dir, ycbv_models):
     o2 = resolve_objects(cfg2, ycb_dir, ycbv_models, cache_dir=tmp_path / "cache")
     assert o2.targets[0].mass != 0.603 and "006_mustard_bottle" in o2.noise_names
     with pytest.raises(AssetError, match="unknown target object '006_mustard_bottle'"):
-        resolve_objects(cfg2.replace(target_objects=("006_mustard_bottle",)), ycb_dir, ycbv_models, cache_dir=tmp_path / "cache")
+        resolve_objects(cfg2.replace(target_objects=("006_mustard_bottle",)), ycb_dir, ycbv_models,
+                        cache_dir=tmp_path / "cache")
     with pytest.raises(AssetError, match="both target and noise: 006_mustard_bottle"):
         resolve_objects(cfg.replace(target_objects=("5",), noise_objects=("006_mustard_bottle",)), ycb_dir, ycbv_models,
                         cache_dir=tmp_path / "cache")
@@ -218,7 +230,8 @@ def test_bad_input_is_one_line(tmp_path, ycb_dir, capsys, monkeypatch):
     monkeypatch.setenv("SIXDPOSE_CACHE", str(tmp_path / "cache"))
     for extra, message in _bad_inputs(tmp_path):
         out = tmp_path / "out"
-        rc = main(["generate", "--profile", "smoke", "--out", str(out), "--assets", str(ycb_dir), "--no-progress", *extra])
+        rc = main(["generate", "--profile", "smoke", "--out", str(out), "--assets", str(ycb_dir), "--no-progress",
+                   *extra])
         err = capsys.readouterr().err
         assert rc == 2 and message in err and len(err.strip().splitlines()) == 1, (extra, err)
         assert not out.exists()
@@ -292,7 +305,7 @@ def test_bop_model_targets(tmp_path, ycb_dir, ycbv_models):
     ds = open_dataset(out)
     meshes = {}
     n_checked = 0
-    for key in ds.keys():
+    for key in ds.keys():  # noqa: SIM118 (a dataset reader, not a dict: iterating it yields samples)
         s = ds.load(key)
         np.testing.assert_allclose(s.K, [[YCBV_K[0], 0, YCBV_K[2]], [0, YCBV_K[1], YCBV_K[3]], [0, 0, 1]])
         assert s.rgb.shape == (480, 640, 3)
@@ -324,5 +337,6 @@ def test_bop_model_targets(tmp_path, ycb_dir, ycbv_models):
     from sixdpose.generation import GenerationError
 
     with pytest.raises(GenerationError, match="other target models"):
-        (out / "models" / "models_info.yml").write_text((out / "models" / "models_info.yml").read_text().replace("obj_id: 15", "obj_id: 16"))
+        info_path = out / "models" / "models_info.yml"
+        info_path.write_text(info_path.read_text().replace("obj_id: 15", "obj_id: 16"))
         generate(out, cfg, assets=ycb_dir, assets_bop=ycbv_models, cache_dir=tmp_path / "cache", progress=False)

@@ -24,7 +24,7 @@ def test_samples(tiny_dataset, smoke_config):
         assert inst.mask.shape == (480, 640) and inst.mask.dtype == bool and inst.mask.sum() == inst.px_visib
         assert inst.R.shape == (3, 3) and inst.t.shape == (3,)
         assert ds.object_ids[inst.obj_id] == inst.obj_name
-    assert [k[1] for k in ds.keys()] == ds.image_ids
+    assert [k[1] for k in ds.keys()] == ds.image_ids  # noqa: SIM118 (a dataset reader, not a dict)
 
 
 def test_models(tiny_dataset):

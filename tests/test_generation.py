@@ -288,10 +288,10 @@ def test_sensor_setting_applies_the_model_to_depth_only(tmp_path, ycb_dir, smoke
     generate(b, cfg.replace(sensor="kinect"), workers=1, assets=ycb_dir, progress=False)
     assert (a / "gt.yml").read_bytes() == (b / "gt.yml").read_bytes()
     da, db = open_dataset(a), open_dataset(b)
-    for key in da.keys():
+    for key in da.keys():  # noqa: SIM118 (a dataset reader, not a dict: iterating it yields samples)
         sa, sb = da.load(key), db.load(key)
         np.testing.assert_array_equal(sa.rgb, sb.rgb)
-        assert all(np.array_equal(ia.mask, ib.mask) for ia, ib in zip(sa.instances, sb.instances))
+        assert all(np.array_equal(ia.mask, ib.mask) for ia, ib in zip(sa.instances, sb.instances, strict=True))
         view = key[1] % cfg.views
         expected = simulate_depth(sa.depth, sa.K, "kinect", sensor_rng(cfg.seed, key[0], view), rgb=sa.rgb)
         np.testing.assert_array_equal(sb.depth, expected)

@@ -36,7 +36,8 @@ def test_cli_lists_commands():
     assert r.returncode == 0
     for cmd in ("generate", "fetch-ycb"):
         assert cmd in r.stdout
-    r = subprocess.run([sys.executable, "-m", "sixdpose", "generate", "--out", "x", "--bogus"], capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-m", "sixdpose", "generate", "--out", "x", "--bogus"],
+                       capture_output=True, text=True)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "unrecognized arguments" in r.stderr
 
 

@@ -251,7 +251,7 @@ def test_sample_texture_matches_brute_force_bilinear():
     uv = rng.uniform(0, 1, size=(50, 2))
     got = sample_texture(tex, uv)
     T = tex / 255.0
-    for (u, v), g in zip(uv, got):
+    for (u, v), g in zip(uv, got, strict=True):
         x, y = u * 4, (1 - v) * 6
         acc = np.zeros(3)
         for yy in range(7):

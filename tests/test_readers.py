@@ -22,8 +22,8 @@ from sixdpose.artifacts.predictions import (
 )
 from sixdpose.cli import main
 from sixdpose.datasets.base import DatasetError
-from sixdpose.datasets.readers import dataset_fingerprint, open_dataset
 from sixdpose.datasets.bop import BopDataset, export_bop, load_bop_camera
+from sixdpose.datasets.readers import dataset_fingerprint, open_dataset
 from sixdpose.evaluation.evaluate import evaluate
 from test_reg_helpers import YCBV, write_synthetic_dataset
 

@@ -124,7 +124,8 @@ def write_synthetic_dataset(root: Path, n_images: int = 3, two_instances_in_firs
         depth, label = render_depth([(Pd, Nd, R, t) for R, t in poses])
         rgb = np.zeros((H_SMALL, W_SMALL, 3), np.uint8)
         rgb[label >= 0] = (200, 120, 40)
-        insts = [{"obj_name": name, "obj_id": oid, "inst": k, "R": R, "t": t, "mask": label == k} for k, (R, t) in enumerate(poses)]
+        insts = [{"obj_name": name, "obj_id": oid, "inst": k, "R": R, "t": t, "mask": label == k}
+                 for k, (R, t) in enumerate(poses)]
         images.append({"im_id": im, "scene_id": im % 2, "K": K_SMALL, "rgb": rgb, "depth": depth, "instances": insts})
     models = {name: {"obj_id": oid, "diameter": diam, "symmetric": False, "points": P, "normals": N, "colors": C}}
     root = write_dataset(root, images, models, {"generator": "tests.test_reg_helpers"})

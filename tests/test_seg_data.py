@@ -199,9 +199,9 @@ def test_targets_and_deterministic_augmentation(toy):
     classes = ClassMap.from_dataset(ds)
     s = ds[0]
     img, t = sample_to_target(s, classes, 1)
-    assert img.shape == (3, 480, 640) and img.dtype == torch.float32 and 0 <= img.min() and img.max() <= 1
+    assert img.shape == (3, 480, 640) and img.dtype == torch.float32 and img.min() >= 0 and img.max() <= 1
     assert t["masks"].shape[0] == t["boxes"].shape[0] == t["labels"].shape[0] == len(s.instances)
-    for m, b in zip(t["masks"], t["boxes"]):
+    for m, b in zip(t["masks"], t["boxes"], strict=True):
         ys, xs = torch.nonzero(m, as_tuple=True)
         assert b.tolist() == [xs.min().item(), ys.min().item(), xs.max().item() + 1, ys.max().item() + 1]
     cfg = profile_config("smoke", hflip_prob=1.0, color_jitter=(0.3, 0.3, 0.3, 0.05))
@@ -214,7 +214,7 @@ def test_targets_and_deterministic_augmentation(toy):
     assert not torch.equal(v[0][0], a1)
     flipped, tf = augment(img, t, cfg.replace(color_jitter=(0, 0, 0, 0)), torch.Generator().manual_seed(0))
     assert torch.equal(flipped, img.flip(-1)) and torch.equal(tf["masks"], t["masks"].flip(-1))
-    for m, b in zip(tf["masks"], tf["boxes"]):
+    for m, b in zip(tf["masks"], tf["boxes"], strict=True):
         ys, xs = torch.nonzero(m, as_tuple=True)
         assert b.tolist() == [xs.min().item(), ys.min().item(), xs.max().item() + 1, ys.max().item() + 1]
 

@@ -15,8 +15,8 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("pycocotools")
 
-from sixdpose.segmentation import checkpoint as ck  # noqa: E402
 from sixdpose.runs import save_checkpoint  # noqa: E402
+from sixdpose.segmentation import checkpoint as ck  # noqa: E402
 from sixdpose.segmentation.config import profile_config  # noqa: E402
 from sixdpose.segmentation.data import ClassMap  # noqa: E402
 
@@ -148,8 +148,8 @@ def test_image_without_annotations_and_no_detections(toy, run, tmp_path):
     """Images without annotations are segmented; a run with no detection scores 0 AP, not an error."""
     import yaml
 
-    from sixdpose.segmentation.evaluate import evaluate
     from sixdpose.artifacts.predictions import prediction_path
+    from sixdpose.segmentation.evaluate import evaluate
     from sixdpose.segmentation.infer import segment
 
     gt = yaml.safe_load((toy / "gt.yml").read_text())

@@ -84,8 +84,8 @@ def test_overfits_training_images(seg_data, predicted, tmp_path):
 @pytest.mark.filterwarnings("ignore::DeprecationWarning")  # pycocotools' decode under numpy 2
 def test_segment_output_format(seg_data, trained, predicted):
     """The npz files are what the registration stage reads (see the package docstring)."""
-    from sixdpose.datasets import open_dataset
     from sixdpose.artifacts.predictions import prediction_path, read_predictions
+    from sixdpose.datasets import open_dataset
 
     out, r = predicted
     split = json.loads((trained[0] / "split.json").read_text())
@@ -106,7 +106,7 @@ def test_segment_output_format(seg_data, trained, predicted):
         assert set(labels.tolist()) <= ids  # dataset obj ids, not class indices
         assert np.all(np.diff(scores) <= 0) and np.all((scores >= 0) & (scores <= 1))
         dets = read_predictions(out, s, i)
-        assert len(dets) == len(masks) and all(np.array_equal(d.mask, m) for d, m in zip(dets, masks))
+        assert len(dets) == len(masks) and all(np.array_equal(d.mask, m) for d, m in zip(dets, masks, strict=True))
     res = json.loads((out / "coco_results.json").read_text())
     assert len(res) == sum(len(read_predictions(out, s, i)) for s, i in keys)
     from pycocotools import mask as mask_util
@@ -147,7 +147,7 @@ def test_segmenter_batched_equals_single(seg_data, trained):
     rgbs = [ds[0].rgb, ds[1].rgb]
     both = seg.predict(rgbs)
     one = [seg.predict([r])[0] for r in rgbs]
-    for a, b in zip(both, one):
+    for a, b in zip(both, one, strict=True):
         assert np.array_equal(a["labels"], b["labels"])
         assert np.allclose(a["scores"], b["scores"], atol=1e-4)
         if len(a["labels"]):
@@ -162,8 +162,8 @@ def test_segmenter_batched_equals_single(seg_data, trained):
 def test_hybrid_runner_reads_segment_output(seg_data, trained, predicted, tmp_path):
     """``sixdpose register --masks PRED_DIR`` consumes what ``segment`` wrote: one row per detection
     at or above --min-score, on the images segment covered."""
-    from sixdpose.cli import main
     from sixdpose.artifacts.predictions import read_predictions
+    from sixdpose.cli import main
 
     out, _ = predicted
     keys = [tuple(k) for k in json.loads((trained[0] / "split.json").read_text())["train"]["keys"]]

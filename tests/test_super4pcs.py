@@ -10,7 +10,6 @@ from sixdpose.registration.geometry import estimate_normals, to_o3d
 from test_reg_helpers import make_shape
 
 
-
 def _cfg(**kw):
     """Unbounded search settings (no time limit, large candidate caps, stop at LCP 0.98)."""
     from sixdpose.registration.presets import RegistrationConfig
@@ -43,7 +42,7 @@ def test_pair_index_finds_pairs_by_length_both_orders():
     Qn = np.tile([0, 0, 1.0], (4, 1))
     idx = S.PairIndex(Q, Qn)
     f, s, d = idx.ordered_pairs(0.1, 0.005, 0, 0, 1, 0.1)
-    got = set(zip(f.tolist(), s.tolist()))
+    got = set(zip(f.tolist(), s.tolist(), strict=True))
     assert got == {(0, 1), (1, 0)}
     np.testing.assert_allclose(np.linalg.norm(Q[s] - Q[f], axis=1), 0.1)
     np.testing.assert_allclose(d, (Q[s] - Q[f]) / 0.1)
@@ -61,7 +60,8 @@ def test_select_base_is_coplanar_with_crossing_diagonals():
     assert np.linalg.norm(e1 - e2) < 0.002
 
 
-@pytest.mark.parametrize("seed,outliers", [pytest.param(0, 0.0, marks=pytest.mark.slow), pytest.param(1, 0.0, marks=pytest.mark.slow), (2, 0.25), (3, 0.25)])
+@pytest.mark.parametrize("seed,outliers", [pytest.param(0, 0.0, marks=pytest.mark.slow),
+                                           pytest.param(1, 0.0, marks=pytest.mark.slow), (2, 0.25), (3, 0.25)])
 def test_super4pcs_partial_view_known_pose(seed, outliers):
     rng = np.random.default_rng(seed)
     Pm, Nm, _, diam = make_shape(0.003, seed=seed)

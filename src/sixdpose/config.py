@@ -246,7 +246,8 @@ class Config:
         names = {f.name for f in dataclasses.fields(self)}
         bad = sorted((set(flat) | set(nested)) - names)
         if bad:
-            raise ConfigError(f"{type(self).__name__}: unknown config field(s) {', '.join(bad)} (known: {', '.join(sorted(names))})")
+            raise ConfigError(f"{type(self).__name__}: unknown config field(s) {', '.join(bad)} "
+                              f"(known: {', '.join(sorted(names))})")
         for head, sub in nested.items():
             cur = flat.get(head, getattr(self, head))
             if not isinstance(cur, Config):

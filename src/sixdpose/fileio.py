@@ -57,9 +57,8 @@ def atomic_path(path: str | os.PathLike):
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically (see the module docstring); returns ``path``."""
     path = Path(path)
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as f:
-            f.write(data)
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        f.write(data)
     return path
 
 
@@ -200,7 +199,8 @@ def claim_output_file(path: str | os.PathLike, first_line: str) -> bool:
         except OSError as e:
             raise OutputError(f"{path}: cannot read the existing file ({e})") from None
         if head != first_line:
-            raise OutputError(f"{path}: exists and is not an output of sixdpose; choose another file name (nothing was written)")
+            raise OutputError(f"{path}: exists and is not an output of sixdpose; choose another file name "
+                              "(nothing was written)")
         if not os.access(path, os.W_OK):
             raise OutputError(f"{path}: file is not writable")
         return True

@@ -67,7 +67,8 @@ def write_predictions(pred_dir: str | Path, scene_id: int, im_id: int, masks: np
     scores = np.asarray(scores, dtype=np.float32).reshape(-1)
     n = len(labels)
     if masks.ndim != 3 or len(masks) != n or len(scores) != n:
-        raise ValueError(f"expected masks (N,H,W), labels (N,), scores (N,); got {masks.shape}, {labels.shape}, {scores.shape}")
+        raise ValueError(f"expected masks (N,H,W), labels (N,), scores (N,); "
+                         f"got {masks.shape}, {labels.shape}, {scores.shape}")
     arrays = {"masks": masks, "labels": labels, "scores": scores}
     if boxes is not None:
         arrays["boxes"] = np.asarray(boxes, dtype=np.float32).reshape(n, 4)

@@ -47,14 +47,16 @@ def write_table(rows, columns: list[str], csv_path: str | Path | None, tex_path:
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(columns)
     for r in rows:
-        w.writerow([("" if r[c] is None else f"{r[c]:.{digits + 2}f}" if isinstance(r[c], float) and not math.isnan(r[c])
+        w.writerow([("" if r[c] is None
+                     else f"{r[c]:.{digits + 2}f}" if isinstance(r[c], float) and not math.isnan(r[c])
                      else r[c]) for c in columns])
     if csv_path is not None:
         atomic_write_text(csv_path, buf.getvalue())
     if tex_path is None:
         return
     if align is None:
-        first_numeric = next((i for i, c in enumerate(columns) if rows and isinstance(rows[0][c], (int, float))), len(columns))
+        first_numeric = next((i for i, c in enumerate(columns) if rows and isinstance(rows[0][c], (int, float))),
+                             len(columns))
         align = "l" * max(first_numeric, 1) + "r" * (len(columns) - max(first_numeric, 1))
     head = headers if headers is not None else [tex_escape(c) for c in columns]
     lines = ["\\begin{tabular}{" + align + "}", "\\toprule"] + ([super_header] if super_header else [])

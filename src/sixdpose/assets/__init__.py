@@ -8,9 +8,9 @@ from .ycb import (
     load_catalog,
     load_mesh,
     physical_properties,
+    point_cloud_diameter,
     resolve_assets_dir,
     sample_surface,
-    point_cloud_diameter,
 )
 
 __all__ = [

@@ -178,7 +178,8 @@ def _png(img: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def _obj_text(V: np.ndarray, N: np.ndarray, VT: np.ndarray, faces_v: np.ndarray, faces_t: np.ndarray, comment: str) -> str:
+def _obj_text(V: np.ndarray, N: np.ndarray, VT: np.ndarray, faces_v: np.ndarray, faces_t: np.ndarray,
+              comment: str) -> str:
     lines = [f"# {comment}", "mtllib textured.mtl", "usemtl material_0"]
     out = io.StringIO()
     out.write("\n".join(lines) + "\n")

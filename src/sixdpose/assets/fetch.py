@@ -8,8 +8,6 @@ symmetries; shipped with the package) is written for the objects present.
 
 from __future__ import annotations
 
-from ..fileio import atomic_write_text, claim_output_dir
-
 import csv
 import io
 import os
@@ -21,6 +19,7 @@ import urllib.request
 import zlib
 from pathlib import Path
 
+from ..fileio import atomic_write_text, claim_output_dir
 from .ycb import MESH_SUBDIR, AssetError
 
 #: Official YCB object-set download location (``<base>/<name>_google_16k.tgz``).

@@ -7,8 +7,6 @@ of a simulated object is its mesh frame, so ground-truth poses map model points 
 
 from __future__ import annotations
 
-from ..errors import SixdposeError
-
 import csv
 import functools
 import os
@@ -16,6 +14,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from ..errors import SixdposeError
 
 ENV_VAR = "SIXDPOSE_YCB"
 MESH_SUBDIR = "google_16k"

@@ -345,7 +345,8 @@ class BopDataset:
             nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
         info = self.models_info[obj_id]
         m = ObjectModel(
-            self.object_ids[obj_id], obj_id, pts, nrm, ply.colors, float(info["diameter"]) / 1000.0, self.is_symmetric(obj_id),
+            self.object_ids[obj_id], obj_id, pts, nrm, ply.colors, float(info["diameter"]) / 1000.0,
+            self.is_symmetric(obj_id),
             mesh=(pts, tris) if len(tris) else None,
             symmetries={k: info[k] for k in ("symmetries_discrete", "symmetries_continuous", "diameter") if k in info}
             if _is_symmetric(info) else None,
@@ -428,7 +429,7 @@ def export_bop(dataset, out: str | Path, split: str = "test", depth_scale: float
     cam_written = False
     keys = dataset.keys()
     n_clipped = 0
-    for index, (sid, im) in enumerate(tqdm(keys, desc="export-bop", disable=not progress, unit="img")):
+    for index, (_sid, _im) in enumerate(tqdm(keys, desc="export-bop", disable=not progress, unit="img")):
         s: Sample = dataset[index]
         sd = out / split / f"{s.scene_id:06d}"
         if s.scene_id not in scenes:
@@ -453,9 +454,11 @@ def export_bop(dataset, out: str | Path, split: str = "test", depth_scale: float
             })
             gi = {"px_count_visib": int(inst.px_visib)}
             if inst.mask is not None:
-                atomic_write_bytes(sd / "mask_visib" / f"{s.im_id:06d}_{k:06d}.png", png_bytes(inst.mask.astype(np.uint8) * 255))
+                atomic_write_bytes(sd / "mask_visib" / f"{s.im_id:06d}_{k:06d}.png",
+                                   png_bytes(inst.mask.astype(np.uint8) * 255))
                 ys, xs = np.nonzero(inst.mask)
-                bb = [int(xs.min()), int(ys.min()), int(xs.max() - xs.min() + 1), int(ys.max() - ys.min() + 1)] if len(xs) else [-1, -1, -1, -1]
+                bb = ([int(xs.min()), int(ys.min()), int(xs.max() - xs.min() + 1), int(ys.max() - ys.min() + 1)]
+                      if len(xs) else [-1, -1, -1, -1])
                 gi["bbox_visib"] = bb
                 if inst.px_visib < 0:
                     gi["px_count_visib"] = int(inst.mask.sum())
@@ -465,8 +468,11 @@ def export_bop(dataset, out: str | Path, split: str = "test", depth_scale: float
         scenes[s.scene_id]["info"][str(s.im_id)] = infos
         if not cam_written:
             K = s.K
-            cam = {"cx": K[0, 2], "cy": K[1, 2], "fx": K[0, 0], "fy": K[1, 1], "width": w, "height": h, "depth_scale": depth_scale}
-            atomic_write_json(out / "camera.json", {k: float(v) if k not in ("width", "height") else int(v) for k, v in cam.items()}, indent=2)
+            cam = {"cx": K[0, 2], "cy": K[1, 2], "fx": K[0, 0], "fy": K[1, 1], "width": w, "height": h,
+                   "depth_scale": depth_scale}
+            atomic_write_json(out / "camera.json",
+                              {k: float(v) if k not in ("width", "height") else int(v) for k, v in cam.items()},
+                              indent=2)
             cam_written = True
     for sid, d in scenes.items():
         sd = out / split / f"{sid:06d}"
@@ -474,7 +480,8 @@ def export_bop(dataset, out: str | Path, split: str = "test", depth_scale: float
         atomic_write_json(sd / "scene_camera.json", d["cam"])
         atomic_write_json(sd / "scene_gt_info.json", d["info"])
     if n_clipped:
-        log.warning("%d depth pixels beyond the 16-bit range (%.2f m) were written as 0", n_clipped, 65.535 * depth_scale)
+        log.warning("%d depth pixels beyond the 16-bit range (%.2f m) were written as 0",
+                    n_clipped, 65.535 * depth_scale)
     atomic_write_text(
         out / "dataset_info.md",
         f"# sixdpose synthetic dataset exported to BOP\n\nSource: {dataset.location}\n"

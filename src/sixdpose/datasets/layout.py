@@ -102,7 +102,8 @@ def merged_mask(shape: tuple[int, int], instances, codes: dict[str, int] = MERGE
     return merged
 
 
-def image_files(im_id: int, rgb: np.ndarray, depth: np.ndarray, instances, codes: dict[str, int] | None = None) -> dict[str, bytes]:
+def image_files(im_id: int, rgb: np.ndarray, depth: np.ndarray, instances,
+                codes: dict[str, int] | None = None) -> dict[str, bytes]:
     """Encode one image into ``{relative path: bytes}`` of the layout.
 
     Args:
@@ -114,13 +115,15 @@ def image_files(im_id: int, rgb: np.ndarray, depth: np.ndarray, instances, codes
     files = {rgb_file(im_id): png_bytes(rgb), depth_file(im_id): npy_bytes(np.asarray(depth).astype(np.float32))}
     for name, inst, mask in instances:
         files[mask_file(name, im_id, inst)] = png_bytes(mask.astype(np.uint8) * 255)
-    files[merged_mask_file(im_id)] = png_bytes(merged_mask(np.asarray(depth).shape, instances, MERGED_MASK_CODES if codes is None else codes))
+    files[merged_mask_file(im_id)] = png_bytes(
+        merged_mask(np.asarray(depth).shape, instances, MERGED_MASK_CODES if codes is None else codes))
     return files
 
 
 def object_entry(obj_name: str, obj_id: int, inst: int, R: np.ndarray, t: np.ndarray, px_visib: int) -> dict:
     """The ``gt.yml`` entry of one instance (``R``, ``t``: ``X_CO``, metres)."""
-    return {"obj_name": obj_name, "obj_id": int(obj_id), "inst": int(inst), "R": np.asarray(R, float).reshape(3, 3).tolist(),
+    return {"obj_name": obj_name, "obj_id": int(obj_id), "inst": int(inst),
+            "R": np.asarray(R, float).reshape(3, 3).tolist(),
             "t": np.asarray(t, float).reshape(3).tolist(), "px_visib": int(px_visib)}
 
 
@@ -173,16 +176,19 @@ def write_dataset(root: str | Path, images, models: dict[str, dict], manifest: d
     gt = {}
     for im in images:
         insts = im["instances"]
-        write_files(root, image_files(im["im_id"], im["rgb"], im["depth"], [(i["obj_name"], i["inst"], i["mask"]) for i in insts]))
+        write_files(root, image_files(im["im_id"], im["rgb"], im["depth"],
+                                      [(i["obj_name"], i["inst"], i["mask"]) for i in insts]))
         gt[int(im["im_id"])] = {
             "scene_id": int(im["scene_id"]),
             "cam_K": np.asarray(im["K"], float).reshape(3, 3).tolist(),
-            "objects": [object_entry(i["obj_name"], i["obj_id"], i["inst"], i["R"], i["t"], int(np.count_nonzero(i["mask"])))
+            "objects": [object_entry(i["obj_name"], i["obj_id"], i["inst"], i["R"], i["t"],
+                                     int(np.count_nonzero(i["mask"])))
                         for i in insts],
         }
     info = {}
     for name, m in models.items():
-        info[name] = {"obj_id": int(m["obj_id"]), "diameter": float(m["diameter"]), "symmetric": bool(m.get("symmetric", False))}
+        info[name] = {"obj_id": int(m["obj_id"]), "diameter": float(m["diameter"]),
+                      "symmetric": bool(m.get("symmetric", False))}
         if m.get("points") is not None:
             write_ply(root / model_file(name), m["points"], m.get("normals"), m.get("colors"))
     write_models_info(root, info)

@@ -487,7 +487,8 @@ def _load_texture(texture_file: Path, ply_path: Path) -> np.ndarray | None:
 # ------------------------------------------------------------------------------------------
 # writer
 # ------------------------------------------------------------------------------------------
-def write_ply(path: str | Path, points, normals=None, colors=None, faces=None, comment: str = "written by sixdpose") -> Path:
+def write_ply(path: str | Path, points, normals=None, colors=None, faces=None,
+              comment: str = "written by sixdpose") -> Path:
     """Write a binary little-endian PLY (point cloud or triangle mesh), atomically.
 
     Layout: ``x y z`` float32, optional ``nx ny nz`` float32, optional ``red green blue`` uchar,

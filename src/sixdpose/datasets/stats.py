@@ -81,11 +81,19 @@ def claims_table(st: dict) -> list[tuple[str, str, str]]:
         ("noise objects per scene", "5-10", rng(st["noise_per_scene"])),
         ("max instances of one object", "4", str(st["max_instances_of_one_object"])),
         ("objects of interest", "18", str(len(per_obj))),
-        ("visible instances per object (min)", "> 10,000 (at 25,000 images)", f"{min(per_obj.values()) if per_obj else 0:,}"),
-        ("visible target instances per image (mean)", "-", f"{st['instances_per_image'].mean():.1f}" if st["images"] else "n/a"),
-        ("camera distance to table centre, m", "varies", f"{np.percentile(st['camera_distance'], 5):.2f}-{np.percentile(st['camera_distance'], 95):.2f} (5-95%)" if len(st["camera_distance"]) else "n/a"),
-        ("viewing angle below horizontal, deg", "random directions", f"{st['viewing_angle_deg'].min():.0f}-{st['viewing_angle_deg'].max():.0f}" if len(st["viewing_angle_deg"]) else "n/a"),
-        ("camera roll, deg", "not upright", f"{st['camera_roll_deg'].min():.0f} to {st['camera_roll_deg'].max():.0f}" if len(st["camera_roll_deg"]) else "n/a"),
+        ("visible instances per object (min)", "> 10,000 (at 25,000 images)",
+         f"{min(per_obj.values()) if per_obj else 0:,}"),
+        ("visible target instances per image (mean)", "-",
+         f"{st['instances_per_image'].mean():.1f}" if st["images"] else "n/a"),
+        ("camera distance to table centre, m", "varies",
+         f"{np.percentile(st['camera_distance'], 5):.2f}-{np.percentile(st['camera_distance'], 95):.2f} (5-95%)"
+         if len(st["camera_distance"]) else "n/a"),
+        ("viewing angle below horizontal, deg", "random directions",
+         f"{st['viewing_angle_deg'].min():.0f}-{st['viewing_angle_deg'].max():.0f}"
+         if len(st["viewing_angle_deg"]) else "n/a"),
+        ("camera roll, deg", "not upright",
+         f"{st['camera_roll_deg'].min():.0f} to {st['camera_roll_deg'].max():.0f}"
+         if len(st["camera_roll_deg"]) else "n/a"),
         ("objects off the table", "some", f"{100 * st['off_table_fraction']:.1f}%"),
     ]
 

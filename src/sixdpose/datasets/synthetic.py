@@ -125,8 +125,8 @@ class SyntheticDataset:
             except Exception as e:
                 raise DatasetError(f"{dpath}: unreadable depth ({e})") from None
             if not np.issubdtype(raw.dtype, np.floating):
-                raise DatasetError(f"{dpath}: expected float depth in metres, got dtype {raw.dtype} (integer depth would "
-                                   "be read at the wrong scale)")
+                raise DatasetError(f"{dpath}: expected float depth in metres, got dtype {raw.dtype} "
+                                   "(integer depth would be read at the wrong scale)")
             depth_im = raw.astype(np.float32, copy=False)
             if depth_im.ndim != 2 or (rgb_im is not None and depth_im.shape != rgb_im.shape[:2]):
                 raise DatasetError(f"{dpath}: shape {depth_im.shape} does not match the RGB image "
@@ -182,6 +182,6 @@ class SyntheticDataset:
             info = self.models_info[name]
             ply = read_ply(self.root / layout.model_file(name))
             mesh = (ply.vertices, ply.faces) if ply.faces is not None and len(ply.faces) else None
-            self._models[obj_id] = ObjectModel(name, obj_id, ply.vertices, ply.normals, ply.colors, float(info["diameter"]),
-                                               bool(info.get("symmetric", False)), mesh=mesh)
+            self._models[obj_id] = ObjectModel(name, obj_id, ply.vertices, ply.normals, ply.colors,
+                                               float(info["diameter"]), bool(info.get("symmetric", False)), mesh=mesh)
         return self._models[obj_id]

@@ -51,8 +51,8 @@ def instance_errors(sample, gt, model, estimate, syms, with_vsd: bool) -> dict:
         "vsd": None,
     }
     if with_vsd:
-        out["vsd"] = metrics.vsd(R, t, gt.R, gt.t, sample.depth, sample.K, metrics.BOP19_VSD_DELTA, metrics.BOP19_VSD_TAUS,
-                                 True, model.diameter, model.mesh[0], model.mesh[1])
+        out["vsd"] = metrics.vsd(R, t, gt.R, gt.t, sample.depth, sample.K, metrics.BOP19_VSD_DELTA,
+                                 metrics.BOP19_VSD_TAUS, True, model.diameter, model.mesh[0], model.mesh[1])
     return out
 
 

@@ -25,7 +25,8 @@ def draw_pose(ax, rgb: np.ndarray, K: np.ndarray, points: np.ndarray, poses, tit
     ax.axis("off")
 
 
-def plot_cases(reader, result, n_good: int = 3, n_bad: int = 3, ncols: int = 3, title: str = "", max_points: int = 1500):
+def plot_cases(reader, result, n_good: int = 3, n_bad: int = 3, ncols: int = 3, title: str = "",
+               max_points: int = 1500):
     """A grid of good and failed cases of an evaluation: GT (green) and estimate (red) model points
     projected over the image (the paper's Fig. 7 style).
 
@@ -47,7 +48,7 @@ def plot_cases(reader, result, n_good: int = 3, n_bad: int = 3, ncols: int = 3, 
     fig, axes = plt.subplots(nrows, ncols, figsize=(3.4 * ncols, 2.8 * nrows), squeeze=False)
     for ax in axes.flat:
         ax.axis("off")
-    for ax, r in zip(axes.flat, cases):
+    for ax, r in zip(axes.flat, cases, strict=False):  # the grid may have more axes than cases
         s = reader.load((r.scene_id, r.im_id), masks=False, depth=False)
         g, model = s.instances[r.gt_index], reader.model(r.obj_id)
         poses = [(g.R, g.t, "lime", "GT")]

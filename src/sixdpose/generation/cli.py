@@ -51,7 +51,8 @@ def register(sub) -> None:
                    help="BOP camera.json or scene_camera.json: render with its intrinsics and image size "
                         "(sets camera.intrinsics, camera.width, camera.height)")
     p.add_argument("--cache", default=None, metavar="DIR",
-                   help="cache of converted BOP models (default $SIXDPOSE_CACHE/bop_models or ~/.cache/sixdpose/bop_models)")
+                   help="cache of converted BOP models "
+                        "(default $SIXDPOSE_CACHE/bop_models or ~/.cache/sixdpose/bop_models)")
     p.add_argument("--executor", default="local", choices=["local", "ray"], help="local processes or a Ray cluster")
     p.add_argument("--address", default=None, help="Ray cluster address (default: start a local instance)")
     O.add(p, "--no-progress")
@@ -63,7 +64,8 @@ def _run(args) -> int:
     from .runner import generate
 
     overrides = parse_overrides(args.overrides)
-    overrides.update({k: v for k, v in (("scenes", args.scenes), ("views", args.views), ("seed", args.seed)) if v is not None})
+    overrides.update({k: v for k, v in (("scenes", args.scenes), ("views", args.views), ("seed", args.seed))
+                      if v is not None})
     if args.targets is not None:
         overrides["target_objects"] = _names(args.targets)
     if args.noise_objects is not None:

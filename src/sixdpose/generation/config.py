@@ -63,11 +63,13 @@ class CameraConfig(Config):
             try:
                 fx, fy, cx, cy = (float(v) for v in self.intrinsics)
             except (TypeError, ValueError):
-                raise ValueError(f"camera.intrinsics must be (fx, fy, cx, cy) in pixels, got {self.intrinsics!r}") from None
+                raise ValueError(f"camera.intrinsics must be (fx, fy, cx, cy) in pixels, "
+                                 f"got {self.intrinsics!r}") from None
             if not (fx > 0 and fy > 0):
                 raise ValueError(f"camera.intrinsics: fx and fy must be > 0, got {fx}, {fy}")
             if not (0 <= cx < self.width and 0 <= cy < self.height):
-                raise ValueError(f"camera.intrinsics: principal point ({cx}, {cy}) outside the {self.width}x{self.height} image")
+                raise ValueError(f"camera.intrinsics: principal point ({cx}, {cy}) outside the "
+                                 f"{self.width}x{self.height} image")
             object.__setattr__(self, "intrinsics", (fx, fy, cx, cy))
         if not 0 < self.near < self.far:
             raise ValueError(f"need 0 < near < far, got near={self.near}, far={self.far}")
@@ -113,8 +115,9 @@ class GenerationConfig(Config):
             directory that is not a target (a BOP target mapped to a YCB name by ``bop_ycb_map``
             excludes that YCB object: the same physical object is never both).
         symmetric_objects: names (as in ``target_objects``) of the objects evaluated with ADD-S (names
-            that are not targets are allowed and have no effect), or None for the source's flags (``objects.csv``'s ``symmetric``; BOP: a symmetry in
-            ``models_info.json``). Written to ``models_info.yml`` and used by every later stage.
+            that are not targets are allowed and have no effect), or None for the source's flags
+            (``objects.csv``'s ``symmetric``; BOP: a symmetry in ``models_info.json``). Written to
+            ``models_info.yml`` and used by every later stage.
         bop_ycb_map: name of a table from the BOP dataset's obj_ids to YCB names
             (:data:`sixdpose.assets.bop.BOP_YCB_MAPS`: ``ycbv``), or None. With it, masses come from
             ``objects.csv`` and YCB names are accepted for targets; without it a BOP object weighs

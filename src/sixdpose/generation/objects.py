@@ -101,7 +101,8 @@ def _ycb_targets(cfg: GenerationConfig, catalog, csv: Path) -> list[SceneObject]
     sym = set(cfg.symmetric_objects) if cfg.symmetric_objects is not None else None
     if sym is not None:
         _check_subset("symmetric", cfg.symmetric_objects, catalog, f"{csv} (symmetric_objects)")
-    return [SceneObject(n, catalog[n].obj_path, catalog[n].mass, (n in sym) if sym is not None else catalog[n].symmetric,
+    return [SceneObject(n, catalog[n].obj_path, catalog[n].mass,
+                        (n in sym) if sym is not None else catalog[n].symmetric,
                         "target", k + 1, n) for k, n in enumerate(names)]
 
 
@@ -127,7 +128,8 @@ def _bop_ids(tokens, models: dict, ycb_map: dict[int, str], where: str, kind: st
 def _bop_targets(cfg: GenerationConfig, bop_dir: Path, catalog, cache_dir) -> list[SceneObject]:
     models = list_bop_models(bop_dir)
     ycb_map = BOP_YCB_MAPS.get(cfg.bop_ycb_map or "", {})
-    ids = sorted(models) if cfg.target_objects is None else sorted(_bop_ids(cfg.target_objects, models, ycb_map, str(bop_dir), "target"))
+    ids = (sorted(models) if cfg.target_objects is None
+           else sorted(_bop_ids(cfg.target_objects, models, ycb_map, str(bop_dir), "target")))
     sym_ids = None
     if cfg.symmetric_objects is not None:
         sym_ids = set(_bop_ids(cfg.symmetric_objects, models, ycb_map, str(bop_dir), "symmetric"))
@@ -137,8 +139,8 @@ def _bop_targets(cfg: GenerationConfig, bop_dir: Path, catalog, cache_dir) -> li
         obj, digest = converted_model(m.ply_path, cache_dir)
         ycb = ycb_map.get(oid)
         mass = model_mass(load_mesh(obj, with_texture=False), catalog[ycb].mass if ycb in catalog else None)
-        out.append(SceneObject(m.name, obj, mass, (oid in sym_ids) if sym_ids is not None else m.symmetric, "target", oid,
-                               ycb, m.ply_path.name, digest))
+        out.append(SceneObject(m.name, obj, mass, (oid in sym_ids) if sym_ids is not None else m.symmetric,
+                               "target", oid, ycb, m.ply_path.name, digest))
     return out
 
 
@@ -178,7 +180,8 @@ def resolve_objects(cfg: GenerationConfig, assets_dir: str | os.PathLike, bop_mo
         both = [f"{n} (target {taken[n]})" if taken[n] != n else n for n in noise_names if n in taken]
         if both:
             raise AssetError(f"object(s) both target and noise: {', '.join(both)}")
-    noise = [SceneObject(n, catalog[n].obj_path, catalog[n].mass, catalog[n].symmetric, "noise", None, n) for n in noise_names]
+    noise = [SceneObject(n, catalog[n].obj_path, catalog[n].mass, catalog[n].symmetric, "noise", None, n)
+             for n in noise_names]
     try:
         codes = merged_mask_codes([t.name for t in targets], cfg.max_instances)
     except ValueError as e:

@@ -560,7 +560,7 @@ def realsense(
         return z
     A, B, C, D = (np.empty_like(z) for _ in range(4))
     _cos_angle(z, valid, fx, fy, cx, cy, A, B, C, D)
-    ok = A >= _F32(np.cos(max_angle))
+    ok = A >= _F32(np.cos(max_angle))  # noqa: SIM300 (A is an array, not a constant)
     ok &= valid
     ok &= ~_hidden(z, valid, fx, baseline, B, C)
     if noise_scale > 0 and subpixel > 0:

@@ -17,6 +17,9 @@ import numpy as np
 
 from ..datasets.geometry import backproject  # noqa: F401  (re-exported: part of this stage's API)
 
+#: The camera centre in the camera frame (default viewpoint of :func:`estimate_normals`).
+_ORIGIN = np.zeros(3)
+
 
 def to_o3d(points: np.ndarray, normals: np.ndarray | None = None, colors: np.ndarray | None = None):
     """Wrap (N, 3) arrays into an ``open3d.geometry.PointCloud``."""
@@ -30,7 +33,7 @@ def to_o3d(points: np.ndarray, normals: np.ndarray | None = None, colors: np.nda
     return pcd
 
 
-def estimate_normals(pcd, knn: int = 10, camera: np.ndarray | None = np.zeros(3)):
+def estimate_normals(pcd, knn: int = 10, camera: np.ndarray | None = _ORIGIN):
     """Estimate normals in place by a plane fit on the ``knn`` nearest neighbours.
 
     Args:

@@ -144,7 +144,8 @@ def register(subparsers) -> None:
     O.add(p, "--seg")
     O.add(p, "--out", help="prediction directory")
     O.add(p, "--split", help="BOP split to segment (default test; ignored for synthetic data)")
-    p.add_argument("--subset", choices=("all", "train", "test"), default="all", help="all images, or the run's train/test images")
+    p.add_argument("--subset", choices=("all", "train", "test"), default="all",
+                   help="all images, or the run's train/test images")
     O.add(p, "--batch-size")
     O.add(p, "--score-thresh")
     O.add(p, "--workers")

@@ -18,7 +18,6 @@ from torch import nn
 from .config import SegConfig
 
 
-
 def _weights_enum(backbone: str):
     from torchvision.models import ResNet18_Weights, ResNet34_Weights, ResNet50_Weights
 

@@ -30,7 +30,8 @@ def _shape_mask(kind: int, H: int, W: int, cx: float, cy: float, r: float, rng) 
         d = (xx - cx) ** 2 + (yy - cy) ** 2
         return (d <= r * r) & (d >= (0.5 * r) ** 2)
     if kind == 4:  # cross
-        return ((np.abs(xx - cx) <= r) & (np.abs(yy - cy) <= r / 4)) | ((np.abs(yy - cy) <= r) & (np.abs(xx - cx) <= r / 4))
+        return (((np.abs(xx - cx) <= r) & (np.abs(yy - cy) <= r / 4))
+                | ((np.abs(yy - cy) <= r) & (np.abs(xx - cx) <= r / 4)))
     return (np.abs(xx - cx) + np.abs(yy - cy)) <= r  # diamond
 
 
@@ -84,7 +85,8 @@ def make_toy_dataset(
             for c, k, m in reversed(drawn):  # later shapes occlude earlier ones
                 vis = m & ~occupied
                 occupied |= m
-                objs.append({"obj_name": names[c], "obj_id": c + 1, "inst": k, "R": np.eye(3), "t": [0.0, 0.0, 1.0], "mask": vis})
+                objs.append({"obj_name": names[c], "obj_id": c + 1, "inst": k, "R": np.eye(3), "t": [0.0, 0.0, 1.0],
+                             "mask": vis})
             images.append({"im_id": im, "scene_id": scene, "K": K, "rgb": rgb, "depth": np.ones((H, W), np.float32),
                            "instances": objs})
             im += 1
