@@ -20,6 +20,9 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, help="results CSV to write")
     p.add_argument("--preset", default="default", help="parameter preset: default | paper")
     add_set_option(p)
+    p.add_argument("--seed", type=int, default=None,
+                   help="random seed (default: the preset's, 0); each instance's seed is derived from it and "
+                        "its ids: the same seed gives the same estimates with any --workers (in <out>.config.yml)")
     p.add_argument("--workers", type=int, default=2, help="processes (default 2)")
     p.add_argument("--limit", type=int, default=None, help="only the first N images")
     p.add_argument("--stride", type=int, default=1, help="only every N-th image (a fixed subset spread over the scenes)")
@@ -42,7 +45,12 @@ def _run(args) -> int:
     from .runner import run_registration
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    cfg = get_preset(args.preset, **parse_overrides(args.overrides))
+    overrides = parse_overrides(args.overrides)
+    if args.seed is not None:
+        if args.seed < 0:
+            raise UserError("--seed must be >= 0")
+        overrides["seed"] = args.seed
+    cfg = get_preset(args.preset, **overrides)
     if args.workers < 1:
         raise UserError("--workers must be >= 1")
     if args.stride < 1:
