@@ -159,29 +159,33 @@ def process_image(index: int) -> tuple[list[PoseEstimate], tuple | None]:
             if np.isnan(sample.depth[mask]).any():
                 log.debug("scene %d image %d obj %d: NaN depth values ignored", sample.scene_id, sample.im_id, oid)
             cfg_k = dataclasses.replace(cfg, seed=instance_seed(cfg.seed, sample.scene_id, sample.im_id, oid, k))
-            try:
-                with warnings.catch_warnings(record=True) as caught, np.errstate(all="warn", under="ignore"):
-                    warnings.simplefilter("always")
+            error = None
+            with warnings.catch_warnings(record=True) as caught, np.errstate(all="warn", under="ignore"):
+                warnings.simplefilter("always")
+                try:
                     use_rgb = cfg.colour_verify and sample.rgb is not None and sample.rgb.shape[:2] == mask.shape
                     pts, col, _ = backproject(sample.depth, sample.K, mask, sample.rgb if use_rgb else None)
                     if len(pts) < 3:
                         reason = f"mask has {len(pts)} valid depth points (< 3)"
                     else:
                         est = estimate_pose(pts, oid, method, cache, cfg_k, icp=icp, colors=col)
-            except Exception as e:  # a numerical failure or unreadable model in one instance must not stop the run
-                log.warning("scene %d image %d obj %d: registration failed (%s); score 0", sample.scene_id,
-                            sample.im_id, oid, e)
-                rows.append(PoseEstimate.failed(sample.scene_id, sample.im_id, oid, f"error: {e}"))
-                inst_time.append(time.perf_counter() - t0)
-                continue
+                except Exception as e:  # a numerical failure or unreadable model in one instance must not stop the run
+                    error = e
             # a numeric warning (numpy's RuntimeWarning: division by zero, invalid value, ...) fails the
-            # instance and is its reason; other warnings are passed on as they were
+            # instance and is its reason (it is also the likely cause of an error that followed); other
+            # warnings are passed on as they were
             numeric = [w for w in caught if issubclass(w.category, RuntimeWarning)]
             for w in caught:
                 if w not in numeric:
                     warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
             if numeric and not reason:
                 reason, est = f"numerical warning: {numeric[0].message}", None
+            elif error is not None:
+                log.warning("scene %d image %d obj %d: registration failed (%s); score 0", sample.scene_id,
+                            sample.im_id, oid, error)
+                rows.append(PoseEstimate.failed(sample.scene_id, sample.im_id, oid, f"error: {error}"))
+                inst_time.append(time.perf_counter() - t0)
+                continue
             if est is not None and not np.isfinite(est.X_CO).all():
                 reason, est = "non-finite pose", None
         if reason:
