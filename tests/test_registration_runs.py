@@ -166,7 +166,7 @@ def test_register_ctrl_c_is_one_line(tmp_path, worker_cpu_s):
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
     assert err.strip().splitlines()[-1] == "sixdpose register: interrupted", err
-    assert not (tmp_path / "r.csv").exists() or "wrote" not in out
+    assert "wrote" not in out
 
 
 @pytest.mark.drake
