@@ -113,7 +113,8 @@ def test_same_seed_same_results_any_workers_any_load(method, tmp_path):
 def test_seed_option_and_instance_seeds(syn, tmp_path, capsys):
     from sixdpose.registration.runner import instance_seed
 
-    s = {instance_seed(0, 0, 0, 15, k) for k in range(3)} | {instance_seed(1, 0, 0, 15, 0), instance_seed(0, 1, 0, 15, 0)}
+    s = {instance_seed(0, 0, 0, 15, k) for k in range(3)}
+    s |= {instance_seed(1, 0, 0, 15, 0), instance_seed(0, 1, 0, 15, 0)}
     assert len(s) == 5 and all(0 <= x < 2**31 for x in s)
     assert instance_seed(3, 1, 2, 15, 0) == instance_seed(3, 1, 2, 15, 0)
     out = tmp_path / "r.csv"

@@ -42,6 +42,7 @@ class RegistrationError(SixdposeError):
 # per-image work (runs in the worker processes)
 # ------------------------------------------------------------------------------------------
 _W: dict = {}
+_REISSUED: dict = {}  # warnings registry of the non-numeric warnings passed on (each shown once per place)
 
 
 def instance_seed(seed: int, scene_id: int, im_id: int, obj_id: int, k: int) -> int:
@@ -177,7 +178,7 @@ def process_image(index: int) -> tuple[list[PoseEstimate], tuple | None]:
             numeric = [w for w in caught if issubclass(w.category, RuntimeWarning)]
             for w in caught:
                 if w not in numeric:
-                    warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+                    warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, registry=_REISSUED)
             if numeric and not reason:
                 reason, est = f"numerical warning: {numeric[0].message}", None
             elif error is not None:
