@@ -76,4 +76,4 @@ def sigint_ignored():
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, old)
+        signal.signal(signal.SIGINT, old if old is not None else signal.SIG_DFL)  # None: set outside Python
