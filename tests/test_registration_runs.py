@@ -117,6 +117,14 @@ def test_seed_option_and_instance_seeds(syn, tmp_path, capsys):
     s |= {instance_seed(1, 0, 0, 15, 0), instance_seed(0, 1, 0, 15, 0)}
     assert len(s) == 5 and all(0 <= x < 2**31 for x in s)
     assert instance_seed(3, 1, 2, 15, 0) == instance_seed(3, 1, 2, 15, 0)
+    # the seed reaches the methods: another seed, other RANSAC draws (the same one: the same poses)
+    from sixdpose.registration.presets import get_preset
+    from sixdpose.registration.runner import run_registration
+
+    runs = [run_registration(syn, "ransac", cfg=get_preset("default", seed=seed, colour_verify=False), workers=1,
+                             progress=False) for seed in (0, 0, 1)]
+    poses = [np.concatenate([np.r_[r.R.ravel(), r.t] for r in rows]) for rows in runs]
+    assert np.array_equal(poses[0], poses[1]) and not np.array_equal(poses[0], poses[2])
     out = tmp_path / "r.csv"
     assert main(["register", "--data", str(syn), "--method", "ransac", "--seed", "-1", "--out", str(out)]) == 2
     assert "--seed must be >= 0" in capsys.readouterr().err and not out.exists()
