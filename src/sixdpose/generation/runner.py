@@ -144,6 +144,9 @@ class _PropsView(dict):
 
 
 def _worker_init():
+    from ..workers import init_worker
+
+    init_worker()  # die with the parent; Ctrl-C is the parent's (it terminates the pool)
     # llvmpipe: one rendering thread per worker (workers are the parallelism)
     os.environ.setdefault("LP_NUM_THREADS", "1")
 
@@ -372,8 +375,12 @@ def _run(todo, out, cfg, objects, workers, executor, address):
         return
     import multiprocessing as mp
 
+    from ..workers import sigint_ignored
+
     ctx = mp.get_context("spawn")
-    with ctx.Pool(min(workers, len(args)), initializer=_worker_init, maxtasksperchild=50) as pool:
+    with sigint_ignored():  # the workers start with Ctrl-C ignored: the parent alone handles it
+        pool = ctx.Pool(min(workers, len(args)), initializer=_worker_init, maxtasksperchild=50)
+    with pool:  # leaving the block (also by KeyboardInterrupt or the parent's death) ends the workers
         yield from pool.imap_unordered(_worker, args)
 
 

@@ -23,6 +23,8 @@ def register(sub) -> None:
     O.add(p, "--out", help="results CSV to write")
     O.add_profile(p, PRESETS, help="parameter preset (sixdpose.registration.presets; default: default)")
     add_set_option(p)
+    O.add(p, "--seed", help="random seed (default: the preset's, 0); each instance's seed is derived from it and "
+                            "its ids: the same seed gives the same estimates with any --workers (in <out>.config.yml)")
     O.add(p, "--workers")
     O.add(p, "--limit")
     p.add_argument("--stride", type=O.Int(1, 1_000_000), default=1,
@@ -44,7 +46,10 @@ def _run(args) -> int:
     from .runner import run_registration
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    cfg = get_preset(args.profile, **parse_overrides(args.overrides))
+    overrides = parse_overrides(args.overrides)
+    if args.seed is not None:
+        overrides["seed"] = args.seed
+    cfg = get_preset(args.profile, **overrides)
     out = Path(args.out)
     claim_output_file(out, RESULTS_HEADER)  # refuse a foreign file before any work
     ds = open_dataset(args.data, split=args.split)

@@ -108,7 +108,8 @@ def _invert(X_AB: np.ndarray) -> np.ndarray:
 def register_ransac(scene: SceneCloud, ref: Reference, cfg: RegistrationConfig) -> Registration:
     """RANSAC on FPFH correspondences (Open3D ``registration_ransac_based_on_feature_matching``).
 
-    Returns the pose ``X_CO``; score = RANSAC fitness (inlier fraction of the scene cloud).
+    Seeded with ``cfg.seed``; repeatable only when Open3D runs on one thread (the register runner
+    sees to it). Returns the pose ``X_CO``; score = RANSAC fitness (inlier fraction of the scene cloud).
     """
     import open3d as o3d
 
@@ -142,6 +143,7 @@ def register_fgr(scene: SceneCloud, ref: Reference, cfg: RegistrationConfig) -> 
     reg = o3d.pipelines.registration
     t0 = time.perf_counter()
     dist = cfg.fgr_distance_factor * scene.voxel
+    o3d.utility.random.seed(cfg.seed)  # FGR draws random tuples from Open3D's global generator
     opt = reg.FastGlobalRegistrationOption(maximum_correspondence_distance=dist, iteration_number=cfg.fgr_iterations)
     res = reg.registration_fgr_based_on_feature_matching(scene.pcd, ref.pcd, scene.fpfh, ref.fpfh, opt)
     X_OC = np.asarray(res.transformation)  # scene (camera) -> model (object)

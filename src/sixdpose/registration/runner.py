@@ -3,14 +3,24 @@
 The rows are :class:`~sixdpose.artifacts.poses.PoseEstimate` and go to a BOP results CSV
 (:func:`~sixdpose.artifacts.poses.write_results`). ``time`` is the seconds spent on the whole image
 (every instance, every step but disk reads). An instance whose input is unusable gets a row with score
-0 (identity pose) and its reason is logged.
+0 (identity pose) and its reason is logged; so does one whose computation raised or warned (a numpy
+``RuntimeWarning`` from a zero ``cam_K``, say: the warning becomes the row's reason, not stderr noise).
+
+Repeatable: every random choice of an instance (Open3D's RANSAC and FGR, Super4PCS, the colour search)
+is seeded from :func:`instance_seed` (the run's seed and the instance's scene, image, object and
+detection index), and Open3D runs on one thread (its parallel RANSAC is not repeatable otherwise), so
+the same seed and arguments give the same estimates whatever the number of workers, their order or the
+machine's load; only the times differ.
 """
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import logging
 import os
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +44,56 @@ class RegistrationError(SixdposeError):
 # per-image work (runs in the worker processes)
 # ------------------------------------------------------------------------------------------
 _W: dict = {}
+_REISSUED: dict = {}  # warnings registry of the non-numeric warnings passed on (each shown once per place)
+
+
+def instance_seed(seed: int, scene_id: int, im_id: int, obj_id: int, k: int) -> int:
+    """The random seed of one instance: a hash of the run's ``seed`` and the instance's ids.
+
+    Args:
+        seed: the run's seed (``RegistrationConfig.seed``, ``register --seed``), >= 0.
+        scene_id, im_id, obj_id: the instance's scene, image and object ids (>= 0).
+        k: its index among the image's detections (GT instances or predictions), >= 0.
+    Returns:
+        an int in ``[0, 2**31)`` (Open3D's seed is a C ``int``), independent of the worker that
+        registers the instance and of the order of the images.
+    """
+    state = np.random.SeedSequence([int(seed), int(scene_id), int(im_id), int(obj_id), int(k)]).generate_state(1)
+    return int(state[0]) & 0x7FFFFFFF
+
+
+def _open3d_threads(n: int) -> bool:
+    """Limit Open3D to ``n`` threads (0: its automatic default); False if this Open3D cannot (< 0.20,
+    whose OpenMP threads follow ``OMP_NUM_THREADS`` at start-up instead)."""
+    import open3d as o3d
+
+    setter = getattr(o3d.utility, "set_max_threads", None)
+    if setter is None:
+        return False
+    setter(n)
+    return True
+
+
+@contextlib.contextmanager
+def _one_thread():
+    """Open3D on one thread in this process while the block runs (the in-process ``workers=1`` run)."""
+    if not _open3d_threads(1):
+        log.warning("this Open3D has no set_max_threads: RANSAC/FGR may differ from run to run with --workers 1")
+        yield
+        return
+    try:
+        yield
+    finally:
+        _open3d_threads(0)
+
+
+def _init_pool_worker(*args) -> None:
+    """Initializer of the pool workers: die with the parent, leave Ctrl-C to it, one Open3D thread."""
+    from ..workers import init_worker
+
+    init_worker()
+    _open3d_threads(1)
+    _init_worker(*args)
 
 
 def _init_worker(ds: DatasetReader, method: str, icp: bool, cfg: RegistrationConfig, masks: str, min_px: int,
@@ -82,7 +142,7 @@ def process_image(index: int) -> tuple[list[PoseEstimate], tuple | None]:
             bad_model[oid] = f"model unreadable ({e})"
     rows: list[PoseEstimate] = []
     inst_time: list[float] = []
-    for oid, det_score, mask in dets:
+    for k, (oid, det_score, mask) in enumerate(dets):
         t0 = time.perf_counter()
         reason = ""
         if sample.depth is None:
@@ -95,25 +155,48 @@ def process_image(index: int) -> tuple[list[PoseEstimate], tuple | None]:
             reason = "no mask"
         elif mask.shape != sample.depth.shape:
             reason = f"mask shape {mask.shape} != depth shape {sample.depth.shape}"
+        elif not _valid_K(sample.K):
+            reason = "invalid cam_K (fx and fy must be finite and non-zero)"
+        est = None
         if not reason:
             if np.isnan(sample.depth[mask]).any():
                 log.debug("scene %d image %d obj %d: NaN depth values ignored", sample.scene_id, sample.im_id, oid)
-            use_rgb = cfg.colour_verify and sample.rgb is not None and sample.rgb.shape[:2] == mask.shape
-            pts, col, _ = backproject(sample.depth, sample.K, mask, sample.rgb if use_rgb else None)
-            if len(pts) < 3:
-                reason = f"mask has {len(pts)} valid depth points (< 3)"
+            cfg_k = dataclasses.replace(cfg, seed=instance_seed(cfg.seed, sample.scene_id, sample.im_id, oid, k))
+            error = None
+            with warnings.catch_warnings(record=True) as caught, np.errstate(all="warn", under="ignore"):
+                warnings.simplefilter("always")
+                try:
+                    use_rgb = cfg.colour_verify and sample.rgb is not None and sample.rgb.shape[:2] == mask.shape
+                    pts, col, _ = backproject(sample.depth, sample.K, mask, sample.rgb if use_rgb else None)
+                    if len(pts) < 3:
+                        reason = f"mask has {len(pts)} valid depth points (< 3)"
+                    else:
+                        est = estimate_pose(pts, oid, method, cache, cfg_k, icp=icp, colors=col)
+                except Exception as e:  # a numerical failure or unreadable model in one instance must not stop the run
+                    error = e
+            # a numeric warning (numpy's RuntimeWarning: division by zero, invalid value, ...) fails the
+            # instance and is its reason (it is also the likely cause of an error that followed); other
+            # warnings are passed on as they were
+            numeric = [w for w in caught if issubclass(w.category, RuntimeWarning)]
+            for w in caught:
+                if w not in numeric:
+                    warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, registry=_REISSUED)
+            if numeric and not reason:
+                reason, est = f"numerical warning: {numeric[0].message}", None
+            elif error is not None:
+                log.warning("scene %d image %d obj %d: registration failed (%s); score 0", sample.scene_id,
+                            sample.im_id, oid, error)
+                rows.append(PoseEstimate.failed(sample.scene_id, sample.im_id, oid, f"error: {error}"))
+                inst_time.append(time.perf_counter() - t0)
+                continue
+            if est is not None and not np.isfinite(est.X_CO).all():
+                reason, est = "non-finite pose", None
         if reason:
             log.warning("scene %d image %d obj %d: %s; score 0", sample.scene_id, sample.im_id, oid, reason)
             rows.append(PoseEstimate.failed(sample.scene_id, sample.im_id, oid, reason))
             inst_time.append(time.perf_counter() - t0)
             continue
-        try:
-            est = estimate_pose(pts, oid, method, cache, cfg, icp=icp, colors=col)
-        except Exception as e:  # a numerical failure or unreadable model in one instance must not stop the run
-            log.warning("scene %d image %d obj %d: registration failed (%s); score 0", sample.scene_id, sample.im_id, oid, e)
-            rows.append(PoseEstimate.failed(sample.scene_id, sample.im_id, oid, f"error: {e}"))
-            inst_time.append(time.perf_counter() - t0)
-            continue
+        assert est is not None
         bp_time = time.perf_counter() - t0 - est.time  # backprojection etc. (est.time measured inside)
         score = est.score * det_score if pred else est.score
         rows.append(PoseEstimate(sample.scene_id, sample.im_id, oid, float(score), est.X_CO[:3, :3].copy(), est.X_CO[:3, 3].copy()))
@@ -127,6 +210,12 @@ def process_image(index: int) -> tuple[list[PoseEstimate], tuple | None]:
 # ------------------------------------------------------------------------------------------
 # driver
 # ------------------------------------------------------------------------------------------
+def _valid_K(K) -> bool:
+    """True if the intrinsics ``K`` (3, 3) have finite, non-zero focal lengths and a finite centre."""
+    K = np.asarray(K, dtype=np.float64)
+    return K.shape == (3, 3) and bool(np.isfinite(K).all()) and K[0, 0] != 0 and K[1, 1] != 0
+
+
 def check_inputs(ds: DatasetReader, masks: str) -> None:
     """Fail early with one clear line if the split cannot be registered (no depth, no masks).
 
@@ -174,7 +263,8 @@ def run_registration(
         split: BOP split (when ``data`` is a path; ignored for the synthetic layout).
         cfg: configuration (default: the ``default`` preset).
         workers: processes (a pool over images; 1 = in this process). Each worker uses one thread and
-            receives a copy of the reader.
+            receives a copy of the reader; workers die with this process and ignore Ctrl-C (this
+            process's ``KeyboardInterrupt`` terminates them). The rows do not depend on ``workers``.
         limit: only the first ``limit`` images. min_px: with GT masks, skip instances with fewer
             visible pixels (0: register all). min_score: with predicted masks, skip detections scoring
             below this. progress: tqdm bar. indices: explicit image indices.
@@ -205,21 +295,27 @@ def run_registration(
     bar = tqdm(total=len(idx), desc=f"register {method}{'+icp' if icp else ''}", unit="img", disable=not progress)
     if workers <= 1 or len(idx) <= 1:
         _init_worker(*args)
-        for i in idx:
-            r, fail = process_image(i)
-            rows.extend(r)
-            if fail:
-                bad_images.append(fail)
-            bar.update()
+        with _one_thread():
+            for i in idx:
+                r, fail = process_image(i)
+                rows.extend(r)
+                if fail:
+                    bad_images.append(fail)
+                bar.update()
     else:
         import multiprocessing as mp
 
-        # one thread per worker (Open3D/OpenMP, BLAS); spawned children inherit the environment
+        from ..workers import sigint_ignored
+
+        # one thread per worker (Open3D: set_max_threads in the initializer; OpenMP, BLAS: the
+        # environment, which spawned children inherit)
         saved = {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
         for k in saved:
             os.environ[k] = "1"
         try:
-            with mp.get_context("spawn").Pool(workers, initializer=_init_worker, initargs=args) as pool:
+            with sigint_ignored():  # the workers start with Ctrl-C ignored: the parent alone handles it
+                pool = mp.get_context("spawn").Pool(workers, initializer=_init_pool_worker, initargs=args)
+            with pool:  # leaving the block (also by KeyboardInterrupt) terminates the workers
                 for r, fail in pool.imap(process_image, idx, chunksize=1):
                     rows.extend(r)
                     if fail:

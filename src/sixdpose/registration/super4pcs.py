@@ -19,7 +19,8 @@ from, here the masked scene; ``Q`` = cloud searched for congruent sets, here the
    normal agreement fail are dropped, and the rest are verified by the *largest common pointset*
    (LCP): the fraction of sampled ``P`` points within ``delta`` of ``Q`` (with agreeing normals)
    after the transform, first on a subset, then on all samples for the best few.
-5. Stop when the LCP reaches ``stop_lcp``, after ``n_bases`` bases, or after ``max_time`` seconds.
+5. Stop when the LCP reaches ``stop_lcp`` or after ``n_bases`` bases. Every budget counts work (bases,
+   pairs, candidates, join size), never seconds, so the result does not depend on the machine's load.
 
 No Python loop runs over candidate pairs or congruent sets; the only loop is over bases (tens).
 """
@@ -266,7 +267,8 @@ def super4pcs(
               density, at most ``s4pcs_max_q`` of them (random subset);
             * ``s4pcs_bases``: bases to try (None: enough to draw one all-inlier base with 99.9 %
               probability, ``ceil(log(0.001) / log(1 - overlap^4))``);
-            * ``s4pcs_max_time``: wall-clock limit in seconds (None: no limit);
+            * ``s4pcs_max_time``: ignored (it was a wall-clock limit, which made the result depend on
+              the machine's load; kept so that older configs load);
             * ``s4pcs_normal_tol_deg``: normal-angle tolerance for pair filtering and set
               verification (None: normals unused);
             * ``s4pcs_stop_lcp``: stop as soon as a transform reaches this LCP;
@@ -288,7 +290,7 @@ def super4pcs(
 
         cfg = PRESETS["default"]
     overlap, n_samples, n_bases = cfg.s4pcs_overlap, cfg.s4pcs_samples, cfg.s4pcs_bases
-    max_time, normal_tol_deg, stop_lcp = cfg.s4pcs_max_time, cfg.s4pcs_normal_tol_deg, cfg.s4pcs_stop_lcp
+    normal_tol_deg, stop_lcp = cfg.s4pcs_normal_tol_deg, cfg.s4pcs_stop_lcp
     max_candidates, max_pairs, pair_tol_factor = cfg.s4pcs_max_candidates, cfg.s4pcs_max_pairs, cfg.s4pcs_pair_tol_factor
     max_q, join_budget, seed = cfg.s4pcs_max_q, cfg.s4pcs_join_budget, cfg.seed
     delta = cfg.s4pcs_delta if delta is None else float(delta)
@@ -348,8 +350,6 @@ def super4pcs(
     best = (0.0, np.eye(3), np.zeros(3))
     n_cong = n_ver = tried = 0
     for _ in range(n_bases):
-        if max_time is not None and time.perf_counter() - t0 > max_time:
-            break
         base = select_base(Ps, base_dist, planar_tol=max(delta * 0.5, 1e-4), rng=rng, width=width)
         if base is None:
             continue

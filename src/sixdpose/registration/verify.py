@@ -137,6 +137,8 @@ def random_rotations(n: int, seed: int = 0) -> np.ndarray:
     """``n`` uniformly random rotations (n, 3, 3) (fixed per seed, cached), the first one the identity."""
     key = (n, seed)
     if key not in _ROT_CACHE:
+        if len(_ROT_CACHE) >= 8:  # one seed per instance: keep a few sets only (drawing one takes ~0.2 ms)
+            _ROT_CACHE.clear()
         from scipy.spatial.transform import Rotation
 
         R = Rotation.random(n, random_state=seed).as_matrix()
