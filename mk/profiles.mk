@@ -55,8 +55,8 @@ YCBV_POSE_LONG_paper := --profile paper
 # `sixdpose pose-ablation` (notebook 05 shows its result results/P/pose_ablation_P.json): the budget of every
 # variant (equal epochs; on the paper's machine equal seconds) and, for smoke and demo, the images of the
 # held-out split scored (a pipeline check); cpu and paper score every image of data/val (never test)
-ABLATION_smoke := --epochs 3 --val-images 4
-ABLATION_demo  := --epochs 3 --val-images 6
+ABLATION_smoke := --epochs 3 --limit 4
+ABLATION_demo  := --epochs 3 --limit 6
 ABLATION_cpu   := --epochs 1
 ABLATION_paper := --time-budget 1200
 

@@ -52,14 +52,14 @@ $(RUNS)/seg/model.pt: $(TRAIN_DIR)/manifest.json | $(VENV_OK)
 	  $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_SEG))
 
 $(RUNS)/masks/%/meta.json: $(RUNS)/seg/model.pt | $(VENV_OK)
-	$(SIXDPOSE) segment --data $(DATA_$*) --ckpt $(RUNS)/seg --out $(@D) --no-progress
+	$(SIXDPOSE) segment --data $(DATA_$*) --seg $(RUNS)/seg --out $(@D) --no-progress
 
 $(RUNS)/masks/test/meta.json: $(DATA_test)/manifest.json
 $(RUNS)/masks/single/meta.json: $(DATA_single)/manifest.json
 
 # notebook 03's predictions: the run's own held-out training images (notebook 04 registers on them)
 $(RUNS)/seg/pred_test/meta.json: $(RUNS)/seg/model.pt $(TRAIN_DIR)/manifest.json | $(VENV_OK)
-	$(SIXDPOSE) segment --data $(TRAIN_DIR) --ckpt $(RUNS)/seg --subset test --out $(@D) --no-progress
+	$(SIXDPOSE) segment --data $(TRAIN_DIR) --seg $(RUNS)/seg --subset test --out $(@D) --no-progress
 
 # ---- learned pose ------------------------------------------------------------------------------
 _val = $(if $(VAL_DIR),--val $(VAL_DIR))
@@ -76,7 +76,7 @@ $(RUNS)/refiner/model.pt: $(RUNS)/pose/model.pt $(TRAIN_DIR)/manifest.json $(if 
 ABLATION_VAL := $(or $(VAL_DIR),$(DATA_test))
 ABLATION_RESULT := $(RES)/pose_ablation_$(PROFILE).json
 $(ABLATION_RESULT): $(TRAIN_DIR)/manifest.json $(ABLATION_VAL)/manifest.json | $(VENV_OK)
-	$(SIXDPOSE) pose-ablation --train $(TRAIN_DIR) --val $(ABLATION_VAL) --out $(RUNS)/pose_ablation --profile $(P_POSE) \
+	$(SIXDPOSE) pose-ablation --data $(TRAIN_DIR) --val $(ABLATION_VAL) --out $(RUNS)/pose_ablation --profile $(P_POSE) \
 	  $(ABLATION_$(PROFILE)) --no-progress --result-name pose_ablation_$(PROFILE) --results-dir $(RES)
 
 # ---- pose estimates: one results CSV per split x masks x method --------------------------------
@@ -95,7 +95,7 @@ $(foreach m,learned_it2 learned_it2_icp learned_it2_colour,$(eval NEEDS_$(m) := 
 # mask arguments: GT masks count instances with >= 400 visible px (as evaluate does); predicted masks
 # keep detections scoring >= 0.5
 ARGS_register_gt     := --masks gt --min-px 400 --workers $(WORKERS)
-ARGS_register_pred   = --masks $(RUNS)/masks/$(1) --min-score 0.5 --workers $(WORKERS)
+ARGS_register_pred   = --masks $(RUNS)/masks/$(1) --score-thresh 0.5 --workers $(WORKERS)
 ARGS_predict-pose_gt := --masks gt
 ARGS_predict-pose_pred = --masks $(RUNS)/masks/$(1) --score-thresh 0.5
 
@@ -214,7 +214,7 @@ $(RUNS)/lmo_seg/model.pt: | $(VENV_OK)
 	$(SIXDPOSE) train-seg --data $(LMO) --train-split $(LMO_TRAIN_SPLIT) --test-split $(LMO_SPLIT) --out $(@D) \
 	  --no-progress $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_SEG))
 $(RUNS)/masks/lmo/meta.json: $(RUNS)/lmo_seg/model.pt
-	$(SIXDPOSE) segment --data $(LMO) --split $(LMO_SPLIT) --ckpt $(RUNS)/lmo_seg --out $(@D) --no-progress
+	$(SIXDPOSE) segment --data $(LMO) --split $(LMO_SPLIT) --seg $(RUNS)/lmo_seg --out $(@D) --no-progress
 
 define lmo_rule
 $(POSES)/lmo_$(1)_$(2).csv: $(if $(filter pred,$(1)),$(RUNS)/masks/lmo/meta.json) | $(VENV_OK)

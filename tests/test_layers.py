@@ -480,7 +480,7 @@ def test_mk_profiles_and_thresholds_are_the_registry_and_constants():
     for profiles in (POSE_PROFILES, REFINER_PROFILES, SEG_PROFILES):
         assert set(profiles) == set(registry.STAGE_PROFILES)
     assert f"--min-px {constants.MIN_VISIBLE_PX}" in MK["ARGS_register_gt"]
-    assert f"--min-score {constants.MIN_DETECTION_SCORE}" in MK["ARGS_register_pred"]
+    assert f"--score-thresh {constants.MIN_DETECTION_SCORE}" in MK["ARGS_register_pred"]
     assert f"--score-thresh {constants.MIN_DETECTION_SCORE}" in MK["ARGS_predict-pose_pred"]
 
 

@@ -40,7 +40,7 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
     assert out.split(seg_line, 1)[1].lstrip().startswith((f"--profile {seg}", "--resume")) or "--resume" in seg_line
     # the held-out splits' masks, and notebook 03's predictions on the seg run's own held-out images
     assert len(_lines(out, "segment")) == 3
-    assert f".venv/bin/sixdpose segment --data {train} --ckpt runs/{profile}/seg --subset test " \
+    assert f".venv/bin/sixdpose segment --data {train} --seg runs/{profile}/seg --subset test " \
         f"--out runs/{profile}/seg/pred_test --no-progress" in out
     ycbv = profile in ("cpu", "paper")  # the synthetic-to-real branch: ycbv data, 6 networks + 2 refiners, 15 methods on real frames
     kinect = f"{splits[0]}_kinect"  # the multi-instance test split again with kinect depth (notebook 08)
@@ -84,7 +84,7 @@ def test_smoke_runs_a_few_methods_and_lmo_adds_table_1():
     # 16 = 4 methods x 2 splits x 2 mask sources, + 1 kinect row (ransac_icp: the smoke methods with ICP)
     assert len(_lines(out, "evaluate")) == 17 and "results/smoke/single_pred_super4pcs.json" not in out
     assert "--result-name test_kinect_gt_ransac_icp" in out and "test_kinect_gt_super4pcs_icp" not in out
-    assert "--result-name pose_ablation_smoke" in out and "--epochs 3 --val-images 4" in out
+    assert "--result-name pose_ablation_smoke" in out and "--epochs 3 --limit 4" in out
     out = _plan("reproduce", "PROFILE=cpu", "LMO=/data/lmo").stdout
     lmo = [line for line in _lines(out, "evaluate") if "--data /data/lmo" in line]
     assert len(lmo) == 12 and all("--split test" in line for line in lmo)
