@@ -34,7 +34,12 @@ class PerturbedColours:
     def __init__(self, ds):
         self._ds = ds
         self._index = {k: i for i, k in enumerate(ds.keys())}
-        self.location, self.has_depth, self.has_masks, self.manifest = ds.location, ds.has_depth, ds.has_masks, ds.manifest
+        self.location, self.has_depth, self.has_masks, self.manifest = (
+            ds.location,
+            ds.has_depth,
+            ds.has_masks,
+            ds.manifest,
+        )
 
     def __len__(self):
         return len(self._ds)
@@ -88,7 +93,11 @@ def main(argv=None) -> int:
     assert isinstance(perturbed, DatasetReader)
     idx = range(0, len(ds), args.stride)
     table = []
-    for label, reader, colour in (("rendered RGB", ds, True), ("perturbed RGB", perturbed, True), ("no colour step", ds, False)):
+    for label, reader, colour in (
+        ("rendered RGB", ds, True),
+        ("perturbed RGB", perturbed, True),
+        ("no colour step", ds, False),
+    ):
         rows = run_registration(reader, args.method, icp=True, cfg=get_preset("default", colour_verify=colour),
                                 workers=1, min_px=MIN_VISIBLE_PX, progress=False, indices=idx)
         res = evaluate(ds, rows, min_px=MIN_VISIBLE_PX)

@@ -81,8 +81,18 @@ def main(argv=None) -> int:
                                         min_px=args.min_px, progress=False, indices=indices)
                 wall = time.perf_counter() - t0
                 res = evaluate(ds, rows, min_px=args.min_px)
-                table.append((preset, method + ("+icp" if icp else ""), res.accuracy, res.n_gt, res.instances_per_s, res.fps, wall,
-                              res.n_correct))
+                table.append(
+                    (
+                        preset,
+                        method + ("+icp" if icp else ""),
+                        res.accuracy,
+                        res.n_gt,
+                        res.instances_per_s,
+                        res.fps,
+                        wall,
+                        res.n_correct,
+                    )
+                )
                 print(f"{preset:8s} {table[-1][1]:15s} ADD(-S) {res.accuracy:6.2f}%  ({res.n_correct}/{res.n_gt})  "
                       f"{table[-1][4]:7.2f} inst/s  {res.fps:6.2f} FPS  (wall {wall:.1f}s)", flush=True)
     print("\nmethod            " + "  ".join(f"{p:>31s}" for p in args.presets.split(",")))
@@ -97,10 +107,10 @@ def main(argv=None) -> int:
         from sixdpose.artifacts.tables import write_table
 
         cols = ["preset", "method", "add_s_accuracy", "n_gt", "instances_per_s_one_core", "fps", "wall_s"]
-        write_table([dict(zip(cols, t)) for t in table], cols, args.csv)
+        write_table([dict(zip(cols, t, strict=False)) for t in table], cols, args.csv)
     cols = ["preset", "method", "add_s_accuracy", "n_gt", "instances_per_s_one_core", "fps", "wall_s", "n_correct"]
     save_from_args(
-        args, [dict(zip(cols, t)) for t in table], command=script_command(__file__, argv),
+        args, [dict(zip(cols, t, strict=True)) for t in table], command=script_command(__file__, argv),
         units={"add_s_accuracy": "%", "n_gt": "GT instances", "n_correct": "GT instances",
                "instances_per_s_one_core": "instances/s", "fps": "frames/s", "wall_s": "s"},
         description=f"hybrid registration on one core, GT masks, >= {args.min_px} px: ADD(-S) < 0.1 d and instances/s "

@@ -76,7 +76,10 @@ def main(argv=None) -> int:
 
         data = ensure_dataset(Path(__file__).resolve().parents[1] / "data" / "val", profile="val")
     variants = [_parse_variant(v) for v in (args.variant or ["base:"])]
-    jobs = [(str(data), args.split, args.method, args.icp, args.preset, n, kw, args.stride, args.min_px) for n, kw in variants]
+    jobs = [
+        (str(data), args.split, args.method, args.icp, args.preset, n, kw, args.stride, args.min_px)
+        for n, kw in variants
+    ]
     label = args.method + ("+icp" if args.icp else "")
     out = []
     with mp.get_context("spawn").Pool(max(1, min(args.jobs, len(jobs)))) as pool:
@@ -89,9 +92,9 @@ def main(argv=None) -> int:
         from sixdpose.artifacts.tables import write_table
 
         cols = ["method", "variant", "overrides", "add_s_accuracy", "n_correct", "n_gt", "instances_per_s"]
-        write_table([dict(zip(cols, o)) for o in out], cols, args.csv)
+        write_table([dict(zip(cols, o, strict=True)) for o in out], cols, args.csv)
     cols = ["method", "variant", "overrides", "add_s_accuracy", "n_correct", "n_gt", "instances_per_s"]
-    save_from_args(args, [dict(zip(cols, o)) for o in out], command=script_command(__file__, argv),
+    save_from_args(args, [dict(zip(cols, o, strict=True)) for o in out], command=script_command(__file__, argv),
                    units={"add_s_accuracy": "%", "n_correct": "GT instances", "n_gt": "GT instances",
                           "instances_per_s": "instances/s"},
                    description=f"{label} sweep on every {args.stride}-th image of {Path(str(data)).name} (GT masks, "

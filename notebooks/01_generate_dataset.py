@@ -1,7 +1,9 @@
 # %% [markdown]
 # # 01 · Generate the synthetic dataset (paper section III)
 #
-# Drake drops 5-20 target and 5-10 noise YCB objects on a table (some beyond its edge), simulates the physics until everything rests, and renders 20 RGB-D views along a random camera arc. The output follows the paper's layout (section III-C); see `sixdpose.datasets.synthetic`.
+# Drake drops 5-20 target and 5-10 noise YCB objects on a table (some beyond its edge), simulates the physics until
+# everything rests, and renders 20 RGB-D views along a random camera arc. The output follows the paper's layout
+# (section III-C); see `sixdpose.datasets.synthetic`.
 #
 # `make` generates the dataset (`sixdpose generate --profile PROFILE --out DATA`, one rule per generator
 # profile of the graph; an interrupted run resumes, completed scenes are kept); this notebook shows it. A
@@ -10,7 +12,9 @@
 # %% tags=["parameters"]
 # Parameters: plain values only (papermill overrides them). None means "from the environment / the profile",
 # resolved in the next cell: PROFILE from $SIXDPOSE_PROFILE (the CI / headless switch, default "smoke").
-PROFILE = None  # a generator profile: smoke (CI), demo (laptop CPU), train / test / test_single (the cpu graph), paper (GPU machine, 25,000 images)
+# a generator profile: smoke (CI), demo (laptop CPU), train / test / test_single (the cpu graph),
+# paper (GPU machine, 25,000 images)
+PROFILE = None
 DATA = None  # None: $SIXDPOSE_DATA, else ../data/<PROFILE>
 FIGURES = "../figures"
 WORKERS = 2  # unused (the generator's workers are make's WORKERS)
@@ -26,6 +30,7 @@ import json
 from pathlib import Path
 
 import matplotlib
+
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
@@ -49,7 +54,7 @@ manifest = json.loads(Path(DATA, "manifest.json").read_text())
 # %%
 ds = open_dataset(DATA)
 scene = ds.keys()[0][0]
-keys = [k for k in ds.keys() if k[0] == scene][:6]
+keys = [k for k in ds.keys() if k[0] == scene][:6]  # noqa: SIM118 (a dataset reader's keys(), not a dict)
 fig = plot_views([ds.load(k) for k in keys], ncols=3, title=f"scene {scene}")
 fig.savefig(f"{FIGURES}/scene_views.png", dpi=100)
 plt.show()

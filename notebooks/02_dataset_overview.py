@@ -1,7 +1,8 @@
 # %% [markdown]
 # # 02 · Dataset overview
 #
-# The paper's Fig. 3 (nine random images), the ground truth drawn over the images, and the dataset's statistics against the claims of section III.
+# The paper's Fig. 3 (nine random images), the ground truth drawn over the images, and the dataset's statistics
+# against the claims of section III.
 
 # %% tags=["parameters"]
 # Parameters: plain values only (papermill overrides them). None means "from the environment / the profile",
@@ -21,6 +22,7 @@ GRAPH_PROFILE = {"train": "cpu", "test": "cpu", "test_single": "cpu", "val": "cp
 from pathlib import Path
 
 import matplotlib
+
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
@@ -49,7 +51,8 @@ plt.show()
 # %% [markdown]
 # ## Ground truth: model points projected at the GT pose
 #
-# Every annotated instance's reference model (`models/<object>.ply`) drawn at its `gt.yml` pose with the image's `cam_K`.
+# Every annotated instance's reference model (`models/<object>.ply`) drawn at its `gt.yml` pose with the image's
+# `cam_K`.
 
 # %%
 pick = rng.choice(len(keys), size=min(4, len(ds)), replace=False)
@@ -65,8 +68,11 @@ plt.show()
 # %%
 st = dataset_statistics(ds)
 rows = claims_table(st)
-write_table([dict(zip(("quantity", "paper", "this dataset"), r)) for r in rows], ["quantity", "paper", "this dataset"],
-            f"{FIGURES}/dataset_statistics.csv")
+write_table(
+    [dict(zip(("quantity", "paper", "this dataset"), r, strict=True)) for r in rows],
+    ["quantity", "paper", "this dataset"],
+    f"{FIGURES}/dataset_statistics.csv",
+)
 for q, paper, ours in rows:
     print(f"{q:45s} {paper:30s} {ours}")
 fig = plot_statistics(st)

@@ -62,7 +62,8 @@ plt.show()
 # Left: ground-truth visible masks; right: predicted masks with score ≥ 0.5 (colour = object).
 
 # %%
-meta = json.loads(open(f"{PRED}/meta.json").read())
+with open(f"{PRED}/meta.json") as fh:
+    meta = json.load(fh)
 print(f"{len(meta['images'])} held-out image(s) segmented ({PRED})")
 plot_predictions(DATA, PRED, n=3, out=f"{FIGURES}/seg_examples_{PROFILE}.png")
 plt.show()

@@ -11,7 +11,8 @@
 PROFILE = None  # smoke (CI), demo (laptop CPU), paper (GPU machine, 25,000 images)
 DATA = None  # None: $SIXDPOSE_DATA, else ../data/<PROFILE>
 FIGURES = "../figures"
-PRED_DIR = "auto"  # predicted masks shown in notebook 03; "auto": ../runs/<PROFILE>/seg/pred_test if it exists; None: GT only
+# predicted masks shown in notebook 03; "auto": ../runs/<PROFILE>/seg/pred_test if it exists; None: GT only
+PRED_DIR = "auto"
 SPLIT = "test"
 PRESET = "default"
 MAX_IMAGES = None  # images registered per method; None: smoke 3 (< 2 min), demo 6, paper all
@@ -60,7 +61,7 @@ if PRED_DIR and Path(PRED_DIR).is_dir():
 
 # %%
 table, runs = compare_methods(ds, hybrid_methods(get_preset(PRESET), workers=WORKERS), mask_sources)
-table
+table  # noqa: B018 (the cell's displayed value)
 
 # %%
 write_table(table, ["masks", "method", "fps", "instances_per_s"], figures / "table2_hybrid_fps.csv",

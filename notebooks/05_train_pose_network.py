@@ -19,7 +19,8 @@ PROFILE = None  # smoke (CI), demo (laptop CPU), cpu (2 h on a 2-core CPU: train
 DATA = None  # training data; None: $SIXDPOSE_DATA, else ../data/<PROFILE> (cpu: ../data/train)
 TEST_DATA = None  # held-out data; None: the training data's images (smoke, demo: a pipeline check), else ../data/test
 RUN_DIR = None  # None: ../runs/<PROFILE>/pose (the graph's run)
-POSE_PROFILE = None  # the pose profile of the run, for the titles; None: the pose profile of the same name (smoke for demo)
+# the pose profile of the run, for the titles; None: the pose profile of the same name (smoke for demo)
+POSE_PROFILE = None
 TEST_IMAGES = None  # images predicted; None: smoke 4, demo 6, else all
 FIGURES = "../figures"
 RESULTS = None  # result artifacts; None: ../results/<PROFILE> (the graph's, gitignored for smoke and demo)
@@ -71,11 +72,16 @@ plt.show()
 test = open_dataset(TEST_DATA)
 estimates, _ = predict_dataset(test, RUN_DIR, iterations=0, limit=TEST_IMAGES)
 result = evaluate(test, estimates, min_px=400)
-per_object = [{"obj_id": o, "name": v["name"], "n_gt": v["n_gt"], "add_s": v["accuracy"]} for o, v in result.per_object.items()]
-write_table(per_object + [{"obj_id": "all", "name": "mean over instances", "n_gt": result.n_gt, "add_s": result.accuracy}],
-            ["obj_id", "name", "n_gt", "add_s"], figures / f"pose_per_object_{PROFILE}.csv")
+per_object = [
+    {"obj_id": o, "name": v["name"], "n_gt": v["n_gt"], "add_s": v["accuracy"]} for o, v in result.per_object.items()
+]
+write_table(
+    per_object + [{"obj_id": "all", "name": "mean over instances", "n_gt": result.n_gt, "add_s": result.accuracy}],
+    ["obj_id", "name", "n_gt", "add_s"],
+    figures / f"pose_per_object_{PROFILE}.csv",
+)
 print(f"ADD(-S) {result.accuracy:.2f}% of {result.n_gt} instances, {result.fps:.2f} FPS")
-per_object
+per_object  # noqa: B018 (the cell's displayed value)
 
 # %% [markdown]
 # ## Fig. 7: estimated poses over the images (GT green, estimate red)
@@ -99,5 +105,7 @@ plt.show()
 ablation_result = read_result(ABLATION)
 print(ablation_result.description)
 ablation = pd.DataFrame(ablation_result.rows)
-write_table(ablation, list(ablation.columns), figures / f"pose_ablation_{PROFILE}.csv", figures / f"pose_ablation_{PROFILE}.tex")
-ablation
+write_table(
+    ablation, list(ablation.columns), figures / f"pose_ablation_{PROFILE}.csv", figures / f"pose_ablation_{PROFILE}.tex"
+)
+ablation  # noqa: B018 (the cell's displayed value)

@@ -15,7 +15,8 @@ DATA = None  # training data; None: $SIXDPOSE_DATA, else ../data/<PROFILE> (cpu:
 TEST_DATA = None  # held-out data; None: the training data's images (smoke, demo: a pipeline check), else ../data/test
 POSE_RUN = None  # None: ../runs/<PROFILE>/pose (notebook 05)
 RUN_DIR = None  # None: ../runs/<PROFILE>/refiner
-REFINER_PROFILE = None  # the refiner's profile, for the titles; None: the refiner profile of the same name (smoke for demo)
+# the refiner's profile, for the titles; None: the refiner profile of the same name (smoke for demo)
+REFINER_PROFILE = None
 TEST_IMAGES = None  # images predicted; None: smoke 4, demo 4, else all
 MAX_ITERATIONS = 4
 FIGURES = "../figures"
@@ -60,19 +61,28 @@ plt.show()
 
 # %%
 test = open_dataset(TEST_DATA)
-results = {k: evaluate(test, predict_dataset(test, POSE_RUN, refiner=RUN_DIR, iterations=k, limit=TEST_IMAGES)[0], min_px=400)
-           for k in range(MAX_ITERATIONS + 1)}
+results = {
+    k: evaluate(test, predict_dataset(test, POSE_RUN, refiner=RUN_DIR, iterations=k, limit=TEST_IMAGES)[0], min_px=400)
+    for k in range(MAX_ITERATIONS + 1)
+}
 table = pd.DataFrame([{"iterations": k, "add_s": r.accuracy, "n_gt": r.n_gt, "fps": r.fps} for k, r in results.items()])
-write_table(table, ["iterations", "add_s", "n_gt", "fps"], figures / f"refiner_iterations_{PROFILE}.csv",
-            figures / f"refiner_iterations_{PROFILE}.tex", headers=["Iterations", "ADD(-S) (\\%)", "GT instances", "FPS"])
+write_table(
+    table,
+    ["iterations", "add_s", "n_gt", "fps"],
+    figures / f"refiner_iterations_{PROFILE}.csv",
+    figures / f"refiner_iterations_{PROFILE}.tex",
+    headers=["Iterations", "ADD(-S) (\\%)", "GT instances", "FPS"],
+)
 plot_iterations(table, out=figures / f"refiner_iterations_{PROFILE}.png")
 plt.show()
-table
+table  # noqa: B018 (the cell's displayed value)
 
 # %% [markdown]
 # ## Fig. 7 with two refinement iterations
 
 # %%
-fig = plot_cases(test, results[min(2, MAX_ITERATIONS)], n_good=3, n_bad=3, ncols=3, title="learned pose + 2 refinement iterations")
+fig = plot_cases(
+    test, results[min(2, MAX_ITERATIONS)], n_good=3, n_bad=3, ncols=3, title="learned pose + 2 refinement iterations"
+)
 fig.savefig(figures / f"fig7_refined_{PROFILE}.png", dpi=120)
 plt.show()

@@ -31,6 +31,7 @@ TEX = TEX or f"../paper/generated/{PROFILE}"
 from pathlib import Path
 
 import matplotlib
+
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import pandas as pd
@@ -87,8 +88,11 @@ pd.DataFrame(t2)
 # ADD(-S) % per object and method, for each split and mask source (CSV for all four, LaTeX too).
 
 # %%
-per_object = {(s, k): report.write_per_object(entries, s, k, figures / f"per_object_{s}_{k}.csv", tex / f"per_object_{s}_{k}.tex")
-              for s in ("test", "single") for k in ("gt", "pred")}
+per_object = {
+    (s, k): report.write_per_object(entries, s, k, figures / f"per_object_{s}_{k}.csv", tex / f"per_object_{s}_{k}.tex")
+    for s in ("test", "single")
+    for k in ("gt", "pred")
+}
 pd.DataFrame(per_object[("test", "gt")])
 
 # %%
@@ -143,4 +147,4 @@ sizes = report.dataset_values(entries, ROOT, TRAIN_DATA)
 report.write_macros(entries, PROFILE, tex / "macros.tex", extra={**sizes, **beyond})
 stats = figures / "dataset_statistics.csv"
 report.dataset_table(stats, tex / "table_dataset.tex")
-sizes
+sizes  # noqa: B018 (the cell's displayed value)

@@ -72,7 +72,9 @@ write_table(per_object, ["obj_id", "name", "n_gt", "add_s", "ar", "adds_auc"], f
 best[1], per_object
 
 # %%
-fig = plot_cases(real, res, n_good=3, n_bad=3, ncols=3, title=f"{best[1]} on real Kinect frames: GT (green) vs estimate (red)")
+fig = plot_cases(
+    real, res, n_good=3, n_bad=3, ncols=3, title=f"{best[1]} on real Kinect frames: GT (green) vs estimate (red)"
+)
 fig.savefig(figures / "real_ycbv_poses.png", dpi=120)
 plt.show()
 
@@ -95,4 +97,4 @@ for method in SENSOR_METHODS.split():
                      "instances_per_s": f["instances_per_s"]})
 write_table(rows, ["sensor", "method", "add_s", "n_gt", "instances_per_s"], figures / "sensor_noise.csv",
             figures / "sensor_noise.tex", headers=["Depth", "Method", "ADD(-S)", "GT instances", "Instances/s"])
-rows
+rows  # noqa: B018 (the cell's displayed value)

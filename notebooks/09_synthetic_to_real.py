@@ -68,7 +68,11 @@ figures.mkdir(parents=True, exist_ok=True)
 require_dataset(TRAIN_DATA, PROFILE)
 require_run(POSE_RUN, PROFILE, "the pose network trained on ycbv data")
 require_run(REFINER_RUN, PROFILE, "its refiner")
-plot_training(POSE_RUN, out=figures / f"pose_ycbv_training_{PROFILE}.png", title=f"pose network on generated ycbv data ({POSE_PROFILE})")
+plot_training(
+    POSE_RUN,
+    out=figures / f"pose_ycbv_training_{PROFILE}.png",
+    title=f"pose network on generated ycbv data ({POSE_PROFILE})",
+)
 plt.show()
 
 # %% [markdown]
@@ -94,8 +98,13 @@ if IDEAL_RUN and Path(IDEAL_RUN, "model.pt").is_file():
 methods.update(hybrid_methods(workers=WORKERS, methods=("ransac", "super4pcs"), icp=(True,)))
 table, runs = compare_methods(real, methods, {"gt": ("gt", list(range(len(real)))[:MAX_IMAGES])}, min_px=0, bop=True,
                               also=[("ADD-S (all)", every_symmetric)])
-write_table(table, ["method", "add_s", "ADD-S (all)", "ar", "adds_auc", "fps"], figures / f"synthetic_to_real_{PROFILE}.csv",
-            figures / f"synthetic_to_real_{PROFILE}.tex", headers=["Method", "ADD(-S)", "ADD-S", "AR", "ADD-S AUC", "FPS"])
+write_table(
+    table,
+    ["method", "add_s", "ADD-S (all)", "ar", "adds_auc", "fps"],
+    figures / f"synthetic_to_real_{PROFILE}.csv",
+    figures / f"synthetic_to_real_{PROFILE}.tex",
+    headers=["Method", "ADD(-S)", "ADD-S", "AR", "ADD-S AUC", "FPS"],
+)
 table[["method", "add_s", "ADD-S (all)", "ar", "adds_auc", "n_gt", "fps"]]
 
 # %% [markdown]
@@ -104,10 +113,16 @@ table[["method", "add_s", "ADD-S (all)", "ar", "adds_auc", "n_gt", "fps"]]
 # %%
 per_object = per_object_table(runs)
 write_table(per_object, list(per_object.columns), figures / f"synthetic_to_real_per_object_{PROFILE}.csv")
-per_object
+per_object  # noqa: B018 (the cell's displayed value)
 
 # %%
-fig = plot_cases(real, runs[("gt", "learned (ycbv, kinect depth)")].result, n_good=3, n_bad=3, ncols=3,
-                 title="learned network trained on generated ycbv data, real Kinect frames: GT (green) vs estimate (red)")
+fig = plot_cases(
+    real,
+    runs[("gt", "learned (ycbv, kinect depth)")].result,
+    n_good=3,
+    n_bad=3,
+    ncols=3,
+    title="learned network trained on generated ycbv data, real Kinect frames: GT (green) vs estimate (red)",
+)
 fig.savefig(figures / f"synthetic_to_real_poses_{PROFILE}.png", dpi=120)
 plt.show()

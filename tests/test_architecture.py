@@ -89,10 +89,10 @@ def test_evaluate_is_linear_in_images():
 
 
 def test_stage_entry_points_accept_a_reader(tmp_path):
+    from sixdpose.datasets import open_dataset
     from sixdpose.evaluation.evaluate import evaluate
     from sixdpose.registration.runner import run_registration
     from test_reg_helpers import write_synthetic_dataset
-    from sixdpose.datasets import open_dataset
 
     ds = open_dataset(write_synthetic_dataset(tmp_path / "syn", n_images=1, two_instances_in_first=False))
     rows = run_registration(ds, "ransac", icp=True, workers=1, progress=False)
@@ -103,9 +103,10 @@ def test_stage_entry_points_accept_a_reader(tmp_path):
 # artifacts: one writer and one reader each, round trips
 # --------------------------------------------------------------------------------------------
 def test_results_round_trip_and_foreign_file_refused(tmp_path):
+    from scipy.spatial.transform import Rotation
+
     from sixdpose.artifacts.poses import PoseEstimate, ResultsError, read_results, write_results
     from sixdpose.errors import OutputError
-    from scipy.spatial.transform import Rotation
 
     rows = [PoseEstimate(0, 3, 5, 0.75, Rotation.random(random_state=1).as_matrix(), np.array([0.1, -0.2, 0.9]), 0.5),
             PoseEstimate.failed(1, 4, 2, "no depth")]
@@ -128,8 +129,14 @@ def test_results_round_trip_and_foreign_file_refused(tmp_path):
 
 
 def test_predictions_round_trip(tmp_path):
-    from sixdpose.artifacts.predictions import (PredictionError, list_predictions, read_predictions,
-                                                read_predictions_meta, write_predictions, write_predictions_meta)
+    from sixdpose.artifacts.predictions import (
+        PredictionError,
+        list_predictions,
+        read_predictions,
+        read_predictions_meta,
+        write_predictions,
+        write_predictions_meta,
+    )
 
     m = np.zeros((2, 6, 8), bool)
     m[0, 1:3, 2:5] = True
@@ -171,10 +178,30 @@ def test_layout_round_trip(tmp_path):
     depth = rng.uniform(0.4, 2, (12, 16)).astype(np.float32)
     R, t = np.eye(3), np.array([0.0, 0.1, 0.8])
     pts = rng.normal(size=(30, 3))
-    write_dataset(tmp_path / "d", [{"im_id": 7, "scene_id": 1, "K": np.diag([500.0, 500.0, 1.0]), "rgb": rgb, "depth": depth,
-                                    "instances": [{"obj_name": "055_baseball", "obj_id": 1, "inst": 1, "R": R, "t": t, "mask": mask}]}],
-                  {"055_baseball": {"obj_id": 1, "diameter": 0.07, "symmetric": True, "points": pts, "normals": None, "colors": None}},
-                  {"generator": "test"})
+    write_dataset(
+        tmp_path / "d",
+        [
+            {
+                "im_id": 7,
+                "scene_id": 1,
+                "K": np.diag([500.0, 500.0, 1.0]),
+                "rgb": rgb,
+                "depth": depth,
+                "instances": [{"obj_name": "055_baseball", "obj_id": 1, "inst": 1, "R": R, "t": t, "mask": mask}],
+            }
+        ],
+        {
+            "055_baseball": {
+                "obj_id": 1,
+                "diameter": 0.07,
+                "symmetric": True,
+                "points": pts,
+                "normals": None,
+                "colors": None,
+            }
+        },
+        {"generator": "test"},
+    )
     ds = open_dataset(tmp_path / "d")
     assert ds.keys() == [(1, 7)]
     s = ds[0]
@@ -193,10 +220,9 @@ def test_atomic_path_leaves_nothing_on_failure(tmp_path):
     from sixdpose.fileio import atomic_path, atomic_write_text
 
     p = atomic_write_text(tmp_path / "a.txt", "old")
-    with pytest.raises(RuntimeError):
-        with atomic_path(p) as tmp:
-            tmp.write_text("half")
-            raise RuntimeError("killed")
+    with pytest.raises(RuntimeError), atomic_path(p) as tmp:
+        tmp.write_text("half")
+        raise RuntimeError("killed")
     assert p.read_text() == "old" and sorted(x.name for x in tmp_path.iterdir()) == ["a.txt"]
 
 
@@ -249,20 +275,69 @@ def test_every_writing_command_refuses_a_foreign_directory(tmp_path, command, ca
     argv = {
         "generate": ["generate", "--out", str(d), "--profile", "smoke"],
         "export-bop": ["export-bop", "--data", str(syn), "--out", str(d)],
-        "train-seg": ["train-seg", "--data", str(make_toy_dataset(tmp_path / "toy", n_scenes=1, views=2, size=(64, 80))), "--out", str(d)],
+        "train-seg": [
+            "train-seg",
+            "--data",
+            str(make_toy_dataset(tmp_path / "toy", n_scenes=1, views=2, size=(64, 80))),
+            "--out",
+            str(d),
+        ],
         "segment": ["segment", "--data", str(syn), "--ckpt", str(tmp_path / "no-run"), "--out", str(d)],
-        "register": ["register", "--data", str(syn), "--method", "ransac", "--out", str(d / "models" / "obj_000001.ply")],
+        "register": [
+            "register",
+            "--data",
+            str(syn),
+            "--method",
+            "ransac",
+            "--out",
+            str(d / "models" / "obj_000001.ply"),
+        ],
         "evaluate": ["evaluate", "--data", str(syn), "--results", str(results), "--out", str(d)],
         "fetch-ycb": ["fetch-ycb", "--to", str(d), "--objects", "055_baseball", "--base-url", "http://127.0.0.1:9"],
         "train-pose": ["train-pose", "--data", str(syn), "--out", str(d), "--no-progress"],
-        "train-refiner": ["train-refiner", "--pose", str(tmp_path / "no-run"), "--data", str(syn), "--out", str(d), "--no-progress"],
-        "pose-ablation": ["pose-ablation", "--train", str(syn), "--val", str(syn), "--out", str(d), "--epochs", "1", "--no-progress"],
-        "predict-pose": ["predict-pose", "--data", str(syn), "--pose", str(tmp_path / "no-run"),
-                         "--out", str(d / "models" / "obj_000001.ply"), "--no-progress"],
+        "train-refiner": [
+            "train-refiner",
+            "--pose",
+            str(tmp_path / "no-run"),
+            "--data",
+            str(syn),
+            "--out",
+            str(d),
+            "--no-progress",
+        ],
+        "pose-ablation": [
+            "pose-ablation",
+            "--train",
+            str(syn),
+            "--val",
+            str(syn),
+            "--out",
+            str(d),
+            "--epochs",
+            "1",
+            "--no-progress",
+        ],
+        "predict-pose": [
+            "predict-pose",
+            "--data",
+            str(syn),
+            "--pose",
+            str(tmp_path / "no-run"),
+            "--out",
+            str(d / "models" / "obj_000001.ply"),
+            "--no-progress",
+        ],
         # eval-seg writes two files into a shared directory (figures/, a run): a foreign file where its
         # directory goes is refused here; a foreign seg_ap table in it, by test_eval_seg_claims_its_tables
-        "eval-seg": ["eval-seg", "--data", str(syn), "--pred", str(tmp_path / "no-run"),
-                     "--figures", str(d / "models" / "obj_000001.ply")],
+        "eval-seg": [
+            "eval-seg",
+            "--data",
+            str(syn),
+            "--pred",
+            str(tmp_path / "no-run"),
+            "--figures",
+            str(d / "models" / "obj_000001.ply"),
+        ],
     }[command]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -367,7 +442,11 @@ def _config_classes():
     try:
         from sixdpose.pose import config as pc
 
-        out += [v for v in vars(pc).values() if isinstance(v, type) and dataclasses.is_dataclass(v) and v.__module__ == pc.__name__]
+        out += [
+            v
+            for v in vars(pc).values()
+            if isinstance(v, type) and dataclasses.is_dataclass(v) and v.__module__ == pc.__name__
+        ]
     except ImportError:
         pass
     return out
@@ -394,7 +473,13 @@ def test_invalid_values_and_overrides():
     from sixdpose.errors import ConfigError
     from sixdpose.generation import profile
 
-    assert parse_overrides(["a=1", "b=0.5", "c=null", "d=[1, 2]", "e=true"]) == {"a": 1, "b": 0.5, "c": None, "d": [1, 2], "e": True}
+    assert parse_overrides(["a=1", "b=0.5", "c=null", "d=[1, 2]", "e=true"]) == {
+        "a": 1,
+        "b": 0.5,
+        "c": None,
+        "d": [1, 2],
+        "e": True,
+    }
     with pytest.raises(ConfigError, match="KEY=VALUE"):
         parse_overrides(["oops"])
     cfg = profile("smoke", **{"camera.fov_y_deg": 60, "targets": [3, 4]})
@@ -440,7 +525,11 @@ def test_no_stage_imports_another_stages_private_names():
         for p in (SRC / stage).rglob("*.py") if (SRC / stage).is_dir() else []:
             for level, module, names in _imports(p):
                 parts = module.split(".")
-                target = parts[0] if level == 2 else (parts[1] if level == 0 and parts[0] == "sixdpose" and len(parts) > 1 else None)
+                target = (
+                    parts[0]
+                    if level == 2
+                    else (parts[1] if level == 0 and parts[0] == "sixdpose" and len(parts) > 1 else None)
+                )
                 if target in STAGES and target != stage and any(n.startswith("_") for n in names):
                     bad.append(f"{p.relative_to(SRC)}: from {'.' * level}{module} import {names}")
     assert bad == []
@@ -449,6 +538,10 @@ def test_no_stage_imports_another_stages_private_names():
 def test_no_probing_of_readers():
     """No hasattr/getattr on a dataset or reader anywhere in the package."""
     pat = re.compile(r"(hasattr|getattr)\(\s*(self\.)?(ds|dataset|reader|data)\b")
-    hits = [f"{p.relative_to(SRC)}:{i}" for p in SRC.rglob("*.py") for i, line in enumerate(p.read_text().splitlines(), 1)
-            if pat.search(line)]
+    hits = [
+        f"{p.relative_to(SRC)}:{i}"
+        for p in SRC.rglob("*.py")
+        for i, line in enumerate(p.read_text().splitlines(), 1)
+        if pat.search(line)
+    ]
     assert hits == []

@@ -92,7 +92,7 @@ def test_export_bop_round_trip(tmp_path):
         assert ((sb.depth > 0) == (sa.depth > 0)).all()
         np.testing.assert_allclose(sb.K, sa.K)
         assert len(sa.instances) == len(sb.instances)
-        for ia, ib in zip(sa.instances, sb.instances):
+        for ia, ib in zip(sa.instances, sb.instances, strict=True):
             assert (ia.obj_name, ia.obj_id, ia.inst, ia.px_visib) == (ib.obj_name, ib.obj_id, ib.inst, ib.px_visib)
             np.testing.assert_allclose(ib.R, ia.R, atol=1e-12)
             np.testing.assert_allclose(ib.t, ia.t, atol=1e-9)
@@ -137,7 +137,9 @@ def test_malformed_symmetry_annotation_is_a_one_line_error(tmp_path, capsys):
     bop = _exported(tmp_path)
     ds = open_dataset(bop, split="test")
     s = ds[0]
-    write_results([PoseEstimate(s.scene_id, s.im_id, g.obj_id, 1.0, g.R, g.t, 0.1) for g in s.instances], tmp_path / "r.csv")
+    write_results(
+        [PoseEstimate(s.scene_id, s.im_id, g.obj_id, 1.0, g.R, g.t, 0.1) for g in s.instances], tmp_path / "r.csv"
+    )
     info_path = bop / "models" / "models_info.json"
     info = json.loads(info_path.read_text())
     info["15"]["symmetries_continuous"] = [{"axis": [0, 0, 0], "offset": [0, 0, 0]}]

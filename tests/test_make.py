@@ -16,7 +16,9 @@ pytestmark = pytest.mark.skipif(shutil.which("make") is None, reason="GNU make n
 
 def _plan(*args: str) -> subprocess.CompletedProcess:
     # -B: every target out of date, so the plan is the whole graph whatever this checkout holds
-    return subprocess.run(["make", "-nB", "--no-print-directory", *args], cwd=REPO, capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        ["make", "-nB", "--no-print-directory", *args], cwd=REPO, capture_output=True, text=True, timeout=120
+    )
 
 
 def _lines(out: str, cmd: str) -> list[str]:
@@ -34,7 +36,7 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
     out = p.stdout
     gen = {re.search(r"--out (\S+)", line).group(1) for line in _lines(out, "generate")}
     assert gen >= {train, *splits}
-    assert (f"data/val" in gen) == (profile in ("cpu", "paper"))
+    assert ("data/val" in gen) == (profile in ("cpu", "paper"))
     seg_line = next(line for line in _lines(out, "train-seg") if f"--out runs/{profile}/seg" in line)
     # a new run gets the profile; an interrupted one (last.pt in this checkout) is resumed
     assert out.split(seg_line, 1)[1].lstrip().startswith((f"--profile {seg}", "--resume")) or "--resume" in seg_line
@@ -42,11 +44,16 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
     assert len(_lines(out, "segment")) == 3
     assert f".venv/bin/sixdpose segment --data {train} --seg runs/{profile}/seg --subset test " \
         f"--out runs/{profile}/seg/pred_test --no-progress" in out
-    ycbv = profile in ("cpu", "paper")  # the synthetic-to-real branch: ycbv data, 6 networks + 2 refiners, 15 methods on real frames
+    # the synthetic-to-real branch: ycbv data, 6 networks + 2 refiners, 15 methods on real frames
+    ycbv = profile in ("cpu", "paper")
     kinect = f"{splits[0]}_kinect"  # the multi-instance test split again with kinect depth (notebook 08)
     poses = [line for line in _lines(out, "register") + _lines(out, "predict-pose")
              if "ycbv_sample" not in line and kinect not in line]
-    real = [line for line in _lines(out, "register") + _lines(out, "predict-pose") if "--data ../shared/data/ycbv_sample" in line]
+    real = [
+        line
+        for line in _lines(out, "register") + _lines(out, "predict-pose")
+        if "--data ../shared/data/ycbv_sample" in line
+    ]
     evals = [line for line in _lines(out, "evaluate") if "ycbv_sample" not in line and kinect not in line]
     assert len(poses) == 40 and len(evals) == 40  # 10 methods x 2 splits x 2 mask sources
     sensor = [line for line in _lines(out, "evaluate") if f"--data {kinect} " in line]

@@ -15,7 +15,7 @@ PAIRS = sorted(p.stem for p in NB.glob("[0-9][0-9]_*.ipynb"))
 
 
 def test_every_notebook_has_a_percent_twin():
-    assert PAIRS and PAIRS == sorted(p.stem for p in NB.glob("[0-9][0-9]_*.py"))
+    assert PAIRS and sorted(p.stem for p in NB.glob("[0-9][0-9]_*.py")) == PAIRS
 
 
 @pytest.mark.parametrize("name", PAIRS)
@@ -42,7 +42,9 @@ def test_parameters_are_literals_and_no_logic(name):
     for c in nb.cells:
         if c.cell_type == "code":
             for node in ast.walk(ast.parse(c.source)):
-                assert not isinstance(node, (ast.FunctionDef, ast.ClassDef, ast.While)), f"{name}: logic belongs in the package"
+                assert not isinstance(node, (ast.FunctionDef, ast.ClassDef, ast.While)), (
+                    f"{name}: logic belongs in the package"
+                )
 
 
 @pytest.mark.parametrize("name", PAIRS)

@@ -92,7 +92,9 @@ def test_every_generated_input_is_written_by_notebook_07():
     inputs = set(re.findall(r"\\input\{([^}]+)\}", tex))
     graphics = set(re.findall(r"\\includegraphics(?:\[[^\]]*\])?\{([^}]+)\}", tex))
     mk = (REPO / "mk" / "reproduce.mk").read_text()
-    nb = (REPO / "notebooks" / "07_evaluation.py").read_text() + (REPO / "notebooks" / "02_dataset_overview.py").read_text()
+    nb = (REPO / "notebooks" / "07_evaluation.py").read_text() + (
+        REPO / "notebooks" / "02_dataset_overview.py"
+    ).read_text()
     for name in inputs:
         assert f"{name}.tex" in mk or re.search(rf"\b{re.escape(name)}\b", mk) or "per_object_" in name, name
     for g in graphics:
@@ -114,9 +116,12 @@ def test_the_write_up_builds_from_generated_files(tmp_path, lmo):
     res = tmp_path / "results"
     names = ("single_pred_super4pcs", "test_gt_ransac_icp", "test_gt_learned_it2")
     for i, name in enumerate(names + (("lmo_gt_ransac_icp", "lmo_gt_super4pcs") if lmo else ())):
-        write_result(name, {"accuracy": 40.0 + i, "n_gt": 10, "n_correct": 4, "fps": 1.5, "instances_per_s": 6.0,
-                            "n_images": 3}, rows=[{"obj_id": 1, "name": "055_baseball", "n_gt": 10, "add_s_accuracy": 40.0}],
-                     results_dir=res)
+        write_result(
+            name,
+            {"accuracy": 40.0 + i, "n_gt": 10, "n_correct": 4, "fps": 1.5, "instances_per_s": 6.0, "n_images": 3},
+            rows=[{"obj_id": 1, "name": "055_baseball", "n_gt": 10, "add_s_accuracy": 40.0}],
+            results_dir=res,
+        )
     e = report.load_entries(res)
     gen, fig = tmp_path / "gen", tmp_path / "fig"
     gen.mkdir()
@@ -147,4 +152,5 @@ def test_the_write_up_builds_from_generated_files(tmp_path, lmo):
         assert "Pipeline check, not results" in text  # the smoke profile's banner
         assert ("LM-O rows of ours were not run" in text) is not lmo
     assert "Undefined control sequence" not in log and "undefined references" not in log
-    assert ("no result lmo_gt_ransac_icp" in log) is False and ("sixdpose Warning: no result" in log) is True  # missing results warn
+    # missing results warn
+    assert ("no result lmo_gt_ransac_icp" in log) is False and ("sixdpose Warning: no result" in log) is True

@@ -11,15 +11,14 @@ import pytest
 import torch
 
 sys.path.insert(0, str(Path(__file__).parent))
-from test_reg_helpers import H_SMALL, K_SMALL, W_SMALL, make_shape, render_depth  # noqa: E402
-
 from sixdpose.cli import main  # noqa: E402
 from sixdpose.pose import checkpoint as ck  # noqa: E402
-from sixdpose.runs import save_checkpoint  # noqa: E402
 from sixdpose.pose.config import PoseConfig, RefinerConfig, profile_config  # noqa: E402
 from sixdpose.pose.geometry import compose_refinement, quaternion_to_matrix, sixd_to_matrix, to_object_frame  # noqa: E402
 from sixdpose.pose.loss import pose_loss  # noqa: E402
-from sixdpose.pose.model import PSPNet, PoseNet, Refiner, build_posenet  # noqa: E402
+from sixdpose.pose.model import PoseNet, PSPNet, Refiner, build_posenet  # noqa: E402
+from sixdpose.runs import save_checkpoint  # noqa: E402
+from test_reg_helpers import H_SMALL, K_SMALL, W_SMALL, make_shape, render_depth  # noqa: E402
 
 torch.set_num_threads(1)
 OID = 15
@@ -46,7 +45,10 @@ def write_pose_dataset(root: Path, n_images: int = 3, max_deg: float = 60.0, see
         depth, label = render_depth([(Pd, Nd, R, t) for R, t in poses])
         rgb = np.zeros((H_SMALL, W_SMALL, 3), np.uint8)
         rgb[label >= 0] = (200, 120, 40)
-        insts = [{"obj_name": name, "obj_id": OID, "inst": k, "R": R, "t": t, "mask": label == k} for k, (R, t) in enumerate(poses)]
+        insts = [
+            {"obj_name": name, "obj_id": OID, "inst": k, "R": R, "t": t, "mask": label == k}
+            for k, (R, t) in enumerate(poses)
+        ]
         images.append({"im_id": im, "scene_id": im % 2, "K": K_SMALL, "rgb": rgb, "depth": depth, "instances": insts})
     models = {name: {"obj_id": OID, "diameter": diam, "symmetric": False, "points": P, "normals": N, "colors": C}}
     return write_dataset(root, images, models, {"generator": "tests.test_pose"})
@@ -69,9 +71,21 @@ def fake_pose_run(path: Path, cfg: PoseConfig, classes=((OID, "035_power_drill",
     torch.manual_seed(0)
     net = build_posenet(cfg, len(classes))
     path.mkdir(parents=True, exist_ok=True)
-    save_checkpoint({"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "kind": "pose", "config": cfg.to_dict(),
-                    "arch": cfg.arch(), "classes": [list(c) for c in classes], "epoch": 1, "global_step": 0, "elapsed": 0.0,
-                    "model": net.state_dict()}, path / ck.FINAL)
+    save_checkpoint(
+        {
+            "format": ck.FORMAT,
+            "version": ck.CHECKPOINT_VERSION,
+            "kind": "pose",
+            "config": cfg.to_dict(),
+            "arch": cfg.arch(),
+            "classes": [list(c) for c in classes],
+            "epoch": 1,
+            "global_step": 0,
+            "elapsed": 0.0,
+            "model": net.state_dict(),
+        },
+        path / ck.FINAL,
+    )
     return path
 
 
@@ -85,14 +99,22 @@ def test_block_shapes_and_1408_fusion():
     assert net.fuse(cloud, emb).shape == (2, 1408, 20)
     small = PoseNet(3, width=1 / 16)
     imgs = torch.randn(2, 3, 32, 32)
-    out = small(imgs, torch.tensor([0, 1, 1]), torch.randint(0, 32 * 32, (3, 20)), torch.randn(3, 20, 3), torch.tensor([0, 2, 1]))
+    out = small(
+        imgs,
+        torch.tensor([0, 1, 1]),
+        torch.randint(0, 32 * 32, (3, 20)),
+        torch.randn(3, 20, 3),
+        torch.tensor([0, 2, 1]),
+    )
     assert out["R"].shape == (3, 3, 3) and out["t"].shape == (3, 3) and out["emb"].shape == (3, 32, 20)
     assert torch.allclose(out["R"] @ out["R"].transpose(1, 2), torch.eye(3).expand(3, 3, 3), atol=1e-5)
     ref = Refiner(3, width=1.0)
     assert ref.conv5[0].in_channels == 384 and ref.conv6[0].out_channels == 1024
     R, t = ref(torch.randn(3, 20, 3), torch.randn(3, 32, 20), torch.tensor([0, 1, 2]))
     assert R.shape == (3, 3, 3) and t.shape == (3, 3)
-    assert not any(isinstance(m, (torch.nn.BatchNorm2d, torch.nn.GroupNorm, torch.nn.BatchNorm1d)) for m in net.modules())
+    assert not any(
+        isinstance(m, (torch.nn.BatchNorm2d, torch.nn.GroupNorm, torch.nn.BatchNorm1d)) for m in net.modules()
+    )
     assert any(isinstance(m, torch.nn.GroupNorm) for m in PoseNet(1, width=1 / 16, norm="group").modules())
 
 
@@ -135,7 +157,9 @@ def test_quaternion_and_6d_give_rotations():
     assert np.allclose(R.numpy(), want, atol=1e-12)
     R6 = sixd_to_matrix(torch.randn(50, 6, dtype=torch.float64))
     eye = torch.eye(3, dtype=torch.float64).expand(50, 3, 3)
-    assert torch.allclose(R6 @ R6.transpose(1, 2), eye, atol=1e-12) and torch.allclose(torch.linalg.det(R6), torch.ones(50, dtype=torch.float64))
+    assert torch.allclose(R6 @ R6.transpose(1, 2), eye, atol=1e-12) and torch.allclose(
+        torch.linalg.det(R6), torch.ones(50, dtype=torch.float64)
+    )
     Rt = torch.from_numpy(Rotation.random(5, random_state=0).as_matrix())
     assert torch.allclose(sixd_to_matrix(torch.cat([Rt[:, :, 0], Rt[:, :, 1]], 1)), Rt, atol=1e-12)
 
@@ -169,8 +193,12 @@ def test_batched_inference_equals_per_instance(pose_ds, crop):
     net = build_posenet(cfg, 1).eval()
     s = as_reader(pose_ds).load((0, 0))
     rng = np.random.default_rng(0)
-    insts = [extract_instance(s.rgb, s.depth, s.K, g.mask, g.obj_id, crop=crop, margin=0.1, num_points=64, min_points=10,
-                              rng=rng, index=k) for k, g in enumerate(s.instances)]
+    insts = [
+        extract_instance(
+            s.rgb, s.depth, s.K, g.mask, g.obj_id, crop=crop, margin=0.1, num_points=64, min_points=10, rng=rng, index=k
+        )
+        for k, g in enumerate(s.instances)
+    ]
     img = None if crop else s.rgb
     Rb, tb = run_networks(net, None, collate_frames([Frame(img, insts)], {OID: 0}), 0, "cpu")
     for k, inst in enumerate(insts):
@@ -219,7 +247,10 @@ def test_smoke_overfits_and_predict_pose_csv_is_scored(smoke_run, pose_ds, tmp_p
     from sixdpose.evaluation.evaluate import evaluate
 
     out = tmp_path / "res.csv"
-    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(smoke_run), "--out", str(out), "--no-progress"]) == 0
+    assert (
+        main(["predict-pose", "--data", str(pose_ds), "--pose", str(smoke_run), "--out", str(out), "--no-progress"])
+        == 0
+    )
     assert (tmp_path / "res.config.yml").is_file()
     rows = read_results(out)
     assert len(rows) == 4 and all(r.score > 0 for r in rows)
@@ -242,7 +273,9 @@ def test_resume_is_bit_identical(pose_ds, tmp_path):
     for k in a["model"]:
         assert torch.equal(a["model"][k], b["model"][k]), k
     for k in a["optimizer"]["state"]:
-        assert all(torch.equal(a["optimizer"]["state"][k][n], b["optimizer"]["state"][k][n]) for n in ("exp_avg", "exp_avg_sq"))
+        assert all(
+            torch.equal(a["optimizer"]["state"][k][n], b["optimizer"]["state"][k][n]) for n in ("exp_avg", "exp_avg_sq")
+        )
 
 
 def test_time_budget_stops_cleanly(pose_ds, tmp_path):
@@ -258,20 +291,75 @@ def test_time_budget_stops_cleanly(pose_ds, tmp_path):
 @pytest.mark.slow  # uses the trained smoke network
 def test_train_refiner_predict_and_mismatch(smoke_run, pose_ds, tmp_path, capsys):
     ref = tmp_path / "ref"
-    assert main(["train-refiner", "--pose", str(smoke_run), "--data", str(pose_ds), "--out", str(ref), "--profile", "smoke",
-                 "--val", str(pose_ds), "--no-progress", "--set", "epochs=1"]) == 0
+    assert (
+        main(
+            [
+                "train-refiner",
+                "--pose",
+                str(smoke_run),
+                "--data",
+                str(pose_ds),
+                "--out",
+                str(ref),
+                "--profile",
+                "smoke",
+                "--val",
+                str(pose_ds),
+                "--no-progress",
+                "--set",
+                "epochs=1",
+            ]
+        )
+        == 0
+    )
     from sixdpose.pose.train import read_metrics
 
     assert read_metrics(ref)[-1]["val_add"] is not None
     out = tmp_path / "r.csv"
-    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(smoke_run), "--refiner", str(ref), "--iterations", "2",
-                 "--out", str(out), "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "predict-pose",
+                "--data",
+                str(pose_ds),
+                "--pose",
+                str(smoke_run),
+                "--refiner",
+                str(ref),
+                "--iterations",
+                "2",
+                "--out",
+                str(out),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     other = fake_pose_run(tmp_path / "other", profile_config("smoke", {"width": 0.125}))
     capsys.readouterr()
-    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(other), "--refiner", str(ref), "--out", str(out)]) == 2
+    assert (
+        main(["predict-pose", "--data", str(pose_ds), "--pose", str(other), "--refiner", str(ref), "--out", str(out)])
+        == 2
+    )
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "architecture" in err
-    assert main(["train-refiner", "--pose", str(other), "--data", str(pose_ds), "--out", str(ref), "--resume", "--epochs", "2"]) == 2
+    assert (
+        main(
+            [
+                "train-refiner",
+                "--pose",
+                str(other),
+                "--data",
+                str(pose_ds),
+                "--out",
+                str(ref),
+                "--resume",
+                "--epochs",
+                "2",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "does not match" in err
 
@@ -329,7 +417,7 @@ def test_icp_colour_rows_and_predicted_masks(smoke_run, pose_ds, tmp_path):
 
     reader = as_reader(pose_ds)
     pred = tmp_path / "pred"
-    for key in reader.keys():
+    for key in reader.keys():  # noqa: SIM118 (a dataset reader's keys(), not a dict)
         s = reader.load(key)
         masks = np.stack([g.mask for g in s.instances])
         write_predictions(pred, *key, masks, [g.obj_id for g in s.instances], np.full(len(masks), 0.9))
@@ -340,11 +428,17 @@ def test_icp_colour_rows_and_predicted_masks(smoke_run, pose_ds, tmp_path):
     assert len(rows) == 4 and all(r.score == pytest.approx(0.9) for r in rows)
     assert evaluate(reader, rows, min_px=0).accuracy >= 75.0
     (pred / "0_0.npz").write_bytes(b"")  # an empty prediction file: one line naming it
-    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(smoke_run), "--masks", str(pred), "--out", str(out)]) == 2
+    assert (
+        main(
+            ["predict-pose", "--data", str(pose_ds), "--pose", str(smoke_run), "--masks", str(pred), "--out", str(out)]
+        )
+        == 2
+    )
 
 
-@pytest.mark.parametrize("ov", [{"translation": "centroid_offset", "rotation": "6d"}, {"norm": "group"}, {"norm": "batch"},
-                                {"crop": 0}])
+@pytest.mark.parametrize(
+    "ov", [{"translation": "centroid_offset", "rotation": "6d"}, {"norm": "group"}, {"norm": "batch"}, {"crop": 0}]
+)
 def test_ablation_options_train_and_predict(pose_ds, tmp_path, ov):
     from sixdpose.pose.infer import predict_dataset
     from sixdpose.pose.train import train_pose
@@ -366,9 +460,33 @@ def test_ddp_two_processes_gloo(pose_ds, tmp_path):
         pytest.skip("torchrun not installed")
     env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(Path(__file__).parents[1] / "src"))
     run = tmp_path / "ddp"
-    p = subprocess.run([str(torchrun if torchrun.exists() else "torchrun"), "--nproc_per_node", "2", "--master_port", "29517",
-                        "-m", "sixdpose.cli", "train-pose", "--data", str(pose_ds), "--out", str(run), "--profile", "smoke",
-                        "--set", "epochs=2", "--set", "repeat=2", "--no-progress"], env=env, capture_output=True, text=True, timeout=120)
+    p = subprocess.run(
+        [
+            str(torchrun if torchrun.exists() else "torchrun"),
+            "--nproc_per_node",
+            "2",
+            "--master_port",
+            "29517",
+            "-m",
+            "sixdpose.cli",
+            "train-pose",
+            "--data",
+            str(pose_ds),
+            "--out",
+            str(run),
+            "--profile",
+            "smoke",
+            "--set",
+            "epochs=2",
+            "--set",
+            "repeat=2",
+            "--no-progress",
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert p.returncode == 0, p.stderr[-2000:]
     c = ck.load(run / ck.LAST)
     assert c["world_size"] == 2 and len(c["rng"]) == 2 and c["epoch"] == 2
@@ -377,7 +495,10 @@ def test_ddp_two_processes_gloo(pose_ds, tmp_path):
 def test_ablation_trains_each_variant_and_scores_on_val(pose_ds, tmp_path):
     from sixdpose.pose.ablation import COLUMNS, run_ablation
 
-    variants = {"paper": {"translation": "absolute", "norm": "none"}, "offset+group": {"translation": "centroid_offset", "norm": "group"}}
+    variants = {
+        "paper": {"translation": "absolute", "norm": "none"},
+        "offset+group": {"translation": "centroid_offset", "norm": "group"},
+    }
     t = run_ablation(pose_ds, pose_ds, tmp_path / "abl", profile="smoke", variants=variants, epochs=2, min_px=0)
     assert list(t.columns) == list(COLUMNS) and list(t["variant"]) == ["paper", "offset+group"]
     assert list(t["translation"]) == ["absolute", "centroid_offset"] and list(t["norm"]) == ["none", "group"]

@@ -5,10 +5,11 @@ import csv
 import numpy as np
 import pytest
 
+from sixdpose.artifacts.poses import PoseEstimate as Estimate
+from sixdpose.artifacts.poses import read_results
+from sixdpose.artifacts.predictions import PredictionError, read_predictions
 from sixdpose.cli import main
 from sixdpose.datasets import open_dataset
-from sixdpose.artifacts.poses import PoseEstimate as Estimate, read_results
-from sixdpose.artifacts.predictions import PredictionError, read_predictions
 from sixdpose.evaluation.evaluate import EvaluationError, evaluate
 from sixdpose.registration import geometry
 from sixdpose.registration.geometry import ReferenceCache, backproject
@@ -93,7 +94,14 @@ def views(syn):
         ("super4pcs", False, 0.1),
         ("super4pcs", True, 0.02),
         ("ransac", True, 0.02),
-        pytest.param("fgr", True, 0.02, marks=pytest.mark.xfail(reason="FGR on FPFH fails on most partial views of this shape (known, see report)", strict=True)),
+        pytest.param(
+            "fgr",
+            True,
+            0.02,
+            marks=pytest.mark.xfail(
+                reason="FGR on FPFH fails on most partial views of this shape (known, see report)", strict=True
+            ),
+        ),
     ],
 )
 def test_methods_on_rendered_views(syn, views, method, icp, tol):
@@ -118,8 +126,8 @@ def test_presets_behaviour(syn):
     """Presets are validated configs; the paper preset keeps the full masked cloud (section IV-B)
     while the default one downsamples it; an override changes exactly that field."""
     from sixdpose.errors import ConfigError
-    from sixdpose.registration.methods import prepare_scene
     from sixdpose.registration.geometry import backproject
+    from sixdpose.registration.methods import prepare_scene
 
     with pytest.raises(ConfigError, match="bogus"):
         get_preset("default", bogus=1)
@@ -138,8 +146,26 @@ def test_presets_behaviour(syn):
 
 def test_runner_writes_bop_rows_and_evaluates(syn, tmp_path):
     out = tmp_path / "r.csv"
-    assert main(["register", "--data", str(syn), "--method", "super4pcs", "--icp", "--out", str(out), "--workers", "1", "--no-progress"]) == 0
-    rows = list(csv.DictReader(open(out)))
+    assert (
+        main(
+            [
+                "register",
+                "--data",
+                str(syn),
+                "--method",
+                "super4pcs",
+                "--icp",
+                "--out",
+                str(out),
+                "--workers",
+                "1",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
+    with open(out) as fh:
+        rows = list(csv.DictReader(fh))
     assert list(rows[0]) == ["scene_id", "im_id", "obj_id", "score", "R", "t", "time"]
     assert len(rows) == 4  # image 0 has two instances of the same object: both registered
     assert [(r["scene_id"], r["im_id"]) for r in rows] == [("0", "0"), ("0", "0"), ("1", "1"), ("0", "2")]
@@ -152,7 +178,8 @@ def test_runner_writes_bop_rows_and_evaluates(syn, tmp_path):
     assert res.fps > 0 and res.instances_per_s == pytest.approx(4 * res.fps / 3)
     ev = tmp_path / "ev"
     assert main(["evaluate", "--data", str(syn), "--results", str(out), "--out", str(ev), "--min-px", "50"]) == 0
-    table = list(csv.DictReader(open(ev / "add_s_per_object.csv")))
+    with open(ev / "add_s_per_object.csv") as fh:
+        table = list(csv.DictReader(fh))
     assert table[0]["obj_id"] == "15" and float(table[-2]["add_s_accuracy"]) == 100.0
     assert "tabular" in (ev / "add_s.tex").read_text()
     assert (ev / "timing.csv").is_file()
@@ -170,7 +197,9 @@ def test_evaluate_matching_and_min_px(syn):
     assert (r.n_gt, r.n_correct) == (2, 1)
     # a zero-score estimate is "no estimate"; a top-scoring wrong one takes the only slot
     far = Estimate(0, 0, 15, 0.99, g0.R, g0.t + 1.0, 0.1)
-    r = evaluate(ds, [far, Estimate(0, 0, 15, 0.5, g0.R, g0.t, 0.1), Estimate(0, 0, 15, 0.4, g1.R, g1.t, 0.1)], min_px=0)
+    r = evaluate(
+        ds, [far, Estimate(0, 0, 15, 0.5, g0.R, g0.t, 0.1), Estimate(0, 0, 15, 0.4, g1.R, g1.t, 0.1)], min_px=0
+    )
     assert r.n_correct == 1
     # min_px drops the small instance
     r = evaluate(ds, good, min_px=max(g0.px_visib, g1.px_visib))
@@ -188,7 +217,11 @@ def test_unusable_instances_get_score_zero(syn, tmp_path):
     np.savez(pred / f"{s.scene_id}_{s.im_id}.npz", masks=np.stack([m, empty, m]), labels=np.array([15, 15, 99]),
              scores=np.array([0.9, 0.8, 0.7]))
     dets = read_predictions(pred, s.scene_id, s.im_id)
-    assert [(d.obj_id, d.score) for d in dets] == [(15, pytest.approx(0.9)), (15, pytest.approx(0.8)), (99, pytest.approx(0.7))]
+    assert [(d.obj_id, d.score) for d in dets] == [
+        (15, pytest.approx(0.9)),
+        (15, pytest.approx(0.8)),
+        (99, pytest.approx(0.7)),
+    ]
     assert read_predictions(pred, 0, 0) == []  # no file: no detections
     rows = run_registration(syn, "super4pcs", masks=str(pred), workers=1, progress=False, indices=[1])
     assert len(rows) == 3
@@ -243,9 +276,29 @@ def test_unreadable_images_and_models_are_skipped_and_recorded(syn, tmp_path, ca
 
 
 def test_register_cli_errors(syn, tmp_path, capsys):
-    assert main(["register", "--data", str(tmp_path / "none"), "--method", "fgr", "--out", str(tmp_path / "x.csv")]) == 2
-    assert main(["register", "--data", str(syn), "--method", "fgr", "--masks", str(tmp_path / "nodir"), "--out", str(tmp_path / "x.csv")]) == 2
-    assert main(["register", "--data", str(syn), "--method", "fgr", "--set", "nope=1", "--out", str(tmp_path / "x.csv")]) == 2
+    assert (
+        main(["register", "--data", str(tmp_path / "none"), "--method", "fgr", "--out", str(tmp_path / "x.csv")]) == 2
+    )
+    assert (
+        main(
+            [
+                "register",
+                "--data",
+                str(syn),
+                "--method",
+                "fgr",
+                "--masks",
+                str(tmp_path / "nodir"),
+                "--out",
+                str(tmp_path / "x.csv"),
+            ]
+        )
+        == 2
+    )
+    assert (
+        main(["register", "--data", str(syn), "--method", "fgr", "--set", "nope=1", "--out", str(tmp_path / "x.csv")])
+        == 2
+    )
     err = capsys.readouterr().err
     assert "predicted-mask directory not found" in err and "nope" in err
     assert not (tmp_path / "x.csv").exists()
@@ -258,7 +311,7 @@ def test_two_workers_match_one(syn, tmp_path):
     a = run_registration(syn, "super4pcs", cfg=cfg, workers=1, progress=False)
     b = run_registration(syn, "super4pcs", cfg=cfg, workers=2, progress=False)
     assert [(r.scene_id, r.im_id, r.obj_id) for r in a] == [(r.scene_id, r.im_id, r.obj_id) for r in b]
-    for ra, rb in zip(a, b):
+    for ra, rb in zip(a, b, strict=True):
         np.testing.assert_allclose(ra.R, rb.R, atol=1e-9)
 
 

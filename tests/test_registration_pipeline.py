@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
+from sixdpose.artifacts.poses import PoseEstimate as Estimate
 from sixdpose.cli import main
 from sixdpose.datasets import open_dataset
-from sixdpose.artifacts.poses import PoseEstimate as Estimate
 from sixdpose.evaluation.evaluate import evaluate
-from sixdpose.registration.runner import run_registration
 from sixdpose.registration.presets import get_preset
+from sixdpose.registration.runner import run_registration
 
 
 def test_register_and_evaluate_cli_on_generated_data(tiny_dataset, tmp_path, capsys):

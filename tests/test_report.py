@@ -22,10 +22,12 @@ def _res(d, name, acc, *, fps=2.0, curve=True, rows=None, cpu="Test CPU", config
                "instances_per_s": 4 * fps, "n_images": 10, "n_estimates": 40}
     if curve:
         figures["curve"] = {"threshold_pct": thr, "accuracy": [min(100.0, acc * t / 10) for t in thr]}
-    rows = rows or [{"obj_id": 1, "name": "055_baseball", "n_gt": 50, "n_correct": 25, "add_s_accuracy": acc - 5},
-                    {"obj_id": 2, "name": "056_tennis_ball", "n_gt": 50, "n_correct": 25, "add_s_accuracy": acc + 5},
-                    {"obj_id": "all", "name": "mean over instances", "n_gt": 100, "n_correct": 50, "add_s_accuracy": acc},
-                    {"obj_id": "objects", "name": "mean over objects", "n_gt": "", "n_correct": "", "add_s_accuracy": acc}]
+    rows = rows or [
+        {"obj_id": 1, "name": "055_baseball", "n_gt": 50, "n_correct": 25, "add_s_accuracy": acc - 5},
+        {"obj_id": 2, "name": "056_tennis_ball", "n_gt": 50, "n_correct": 25, "add_s_accuracy": acc + 5},
+        {"obj_id": "all", "name": "mean over instances", "n_gt": 100, "n_correct": 50, "add_s_accuracy": acc},
+        {"obj_id": "objects", "name": "mean over objects", "n_gt": "", "n_correct": "", "add_s_accuracy": acc},
+    ]
     p = write_result(name, figures, rows=rows, results_dir=d, command=["sixdpose", "evaluate"], config=config)
     doc = json.loads(p.read_text())  # a machine of our choosing, so the letters are predictable
     doc["provenance"]["hardware"] = {"cpu": cpu, "cpu_count": 2, "cpus_available": 2, "ram_gib": 8.0, "gpus": []}
@@ -70,7 +72,10 @@ def test_table3_has_the_papers_column_beside_the_like_for_like_one(results, tmp_
     assert "single-instance subset" in tex and "Table III" in tex and "\\cmidrule" in tex
     assert "Super4PCS & 57.32 & 60.00 & 80.00 & -- & 70.00" in tex
     csv = (tmp_path / "t3.csv").read_text().splitlines()
-    assert csv[0] == "method,paper,single_pred,single_gt,test_pred,test_gt" and "Super4PCS,57.3200,60.0000,80.0000,,70.0000" in csv
+    assert (
+        csv[0] == "method,paper,single_pred,single_gt,test_pred,test_gt"
+        and "Super4PCS,57.3200,60.0000,80.0000,,70.0000" in csv
+    )
 
 
 def test_table1_without_and_with_lmo(results, tmp_path):
@@ -121,17 +126,24 @@ def test_macros_hold_every_number_and_findings(results):
     assert "\\csname sdp@best@single@pred@hybrid\\endcsname{Super4PCS}" in text
     assert "\\csname sdp@val@images@train\\endcsname{240}" in text
     f = report.findings(e)
-    assert f["finding@setting"].startswith("the best hybrid method (Super4PCS, 60.00 %) is 30.00 points higher than the best learned one")
+    assert f["finding@setting"].startswith(
+        "the best hybrid method (Super4PCS, 60.00 %) is 30.00 points higher than the best learned one"
+    )
     assert "(57.32 against 26.87 %)" in f["finding@setting"]
-    assert f["finding@repeated"].startswith("ADD(-S) accuracy on the single-instance subset is 10.00 points higher than") \
-        and f["finding@repeated"].endswith("(GT masks)")
+    assert f["finding@repeated"].startswith(
+        "ADD(-S) accuracy on the single-instance subset is 10.00 points higher than"
+    ) and f["finding@repeated"].endswith("(GT masks)")
     assert "15.00 points higher than" in f["finding@icp"] and "5.00 points higher than" in f["finding@refine"]
-    assert f["finding@colour"].startswith("n/a") and f["finding@masks"].startswith("ADD(-S) accuracy with predicted masks is 20.00 points lower")
+    assert f["finding@colour"].startswith("n/a") and f["finding@masks"].startswith(
+        "ADD(-S) accuracy with predicted masks is 20.00 points lower"
+    )
     assert f["finding@threshold"].startswith("Super4PCS goes from 30.00 % at 5 % of the diameter to 100.00 % at 20 %")
     _res(results, "single_pred_fgr", 60.0)
     _res(results, "single_pred_fgr_icp", 60.0)
     tied = report.load_entries(results)
-    assert "\\csname sdp@best@single@pred@hybrid\\endcsname{FGR, FGR + ICP and 1 more (tied)}" in report.macros(tied, "cpu")
+    assert "\\csname sdp@best@single@pred@hybrid\\endcsname{FGR, FGR + ICP and 1 more (tied)}" in report.macros(
+        tied, "cpu"
+    )
     assert "\\smallprofilefalse" in report.macros(e, "cpu")
     assert "\\lmofalse" in report.macros({}, "paper")  # no results at all still gives a usable file
 
@@ -157,12 +169,19 @@ def test_curves_fig7_and_dataset_table(results, tmp_path):
     with pytest.raises(report.ReportError, match=r"missing\.csv: cannot read the dataset statistics"):
         report.dataset_table(tmp_path / "missing.csv", tmp_path / "x.tex")
     vals = report.dataset_values(e, tmp_path, None)
-    assert vals == {"images@test": "n/a", "seed@test": "n/a", "images@single": "n/a", "seed@single": "n/a", "images@train": "n/a"}
+    assert vals == {
+        "images@test": "n/a",
+        "seed@test": "n/a",
+        "images@single": "n/a",
+        "seed@single": "n/a",
+        "images@train": "n/a",
+    }
     (tmp_path / "train").mkdir()
     (tmp_path / "train" / "manifest.json").write_text(json.dumps({"num_images": 1200}))
     assert report.dataset_values(e, tmp_path, tmp_path / "train")["images@train"] == "1,200 images"
-    assert "\\csname sdp@val@images@train\\endcsname{1,200 images}" in report.macros(e, "cpu", extra=report.dataset_values(
-        e, tmp_path, tmp_path / "train"))  # a thousands comma, not an escaped {,}
+    assert "\\csname sdp@val@images@train\\endcsname{1,200 images}" in report.macros(
+        e, "cpu", extra=report.dataset_values(e, tmp_path, tmp_path / "train")
+    )  # a thousands comma, not an escaped {,}
 
 
 # --------------------------------------------------------------------------------------------
@@ -187,10 +206,12 @@ def test_evaluate_curve_limit_and_fig7(tmp_path, capsys):
             off = diam * (0.03 if (k, j) == (0, 0) else 0.15 if k == 1 else 0.0)  # one at 3 %, one at 15 %
             rows.append(PoseEstimate(s.scene_id, s.im_id, g.obj_id, 1.0, g.R, g.t + np.array([off, 0, 0]), 0.5))
     res = evaluate(ds, rows, min_px=0)
-    acc = dict(zip(res.curve["threshold_pct"], res.curve["accuracy"]))
+    acc = dict(zip(res.curve["threshold_pct"], res.curve["accuracy"], strict=True))
     assert res.curve["threshold_pct"] == list(CURVE_THRESHOLDS_PCT)
     assert acc[10.0] == pytest.approx(res.accuracy) and res.accuracy == pytest.approx(75.0)  # 3 of 4 instances
-    assert acc[0.0] == 0.0 and acc[2.5] == pytest.approx(50.0) and acc[5.0] == pytest.approx(75.0) and acc[20.0] == 100.0
+    assert (
+        acc[0.0] == 0.0 and acc[2.5] == pytest.approx(50.0) and acc[5.0] == pytest.approx(75.0) and acc[20.0] == 100.0
+    )
     write_results(rows, tmp_path / "r.csv")
     base = ["evaluate", "--data", str(syn), "--results", str(tmp_path / "r.csv"), "--min-px", "0", "--no-bop",
             "--results-dir", str(tmp_path / "results")]
@@ -233,15 +254,24 @@ def test_real_frames_and_ablation_tables(tmp_path):
     for name, acc, auc in (("ycbv_gt_learned", 36.0, 85.0), ("ycbv_gt_learned_ideal", 36.0, 76.0),
                            ("ycbv_gt_learned_colour", 75.0, 90.0), ("ycbv_gt_super4pcs_icp", 90.0, 97.0)):
         write_result(name, {"accuracy": acc, "n_gt": 140, "bop": {"ar": 5.0, "adds_auc": auc}}, results_dir=d)
-    write_result("pose_ablation_cpu", [{"variant": "paper (absolute t, quaternion, no norm)", "val_add": 3.0, "steps": 300},
-                                       {"variant": "+ centroid offset", "val_add": 14.0, "steps": 300}], results_dir=d)
+    write_result(
+        "pose_ablation_cpu",
+        [
+            {"variant": "paper (absolute t, quaternion, no norm)", "val_add": 3.0, "steps": 300},
+            {"variant": "+ centroid offset", "val_add": 14.0, "steps": 300},
+        ],
+        results_dir=d,
+    )
     rows = report.write_real_table(d, tmp_path / "r.csv", tmp_path / "r.tex")
     assert [(r["method"], r["trained_on"]) for r in rows] == [
         ("learned", "ycbv (kinect depth)"), ("learned", "ycbv_ideal (ideal depth)"),
         ("learned + colour verification", "ycbv (kinect depth)"), ("Super4PCS + ICP", "--")]
     assert rows[0]["adds_auc"] == 85.0
     f = report.beyond_findings(d, "cpu")
-    assert "36.00 % ADD(-S) on 140 real instances, and 75.00 %" in f["finding@real"] and "90.00 % (Super4PCS + ICP)" in f["finding@real"]
+    assert (
+        "36.00 % ADD(-S) on 140 real instances, and 75.00 %" in f["finding@real"]
+        and "90.00 % (Super4PCS + ICP)" in f["finding@real"]
+    )
     assert "equal to the same network trained on ideal depth" in f["finding@sensor"]
     assert "9.00 points higher than the ideal-depth network's" in f["finding@sensor"]
     assert "refinement" not in f["finding@sensor"]  # no refined pair: no sentence about it
@@ -257,7 +287,9 @@ def test_real_frames_and_ablation_tables(tmp_path):
     rows = report.real_table(d)
     assert [r["trained_on"] for r in rows if r["method"] == "learned + colour verification"] == [
         "ycbv (kinect depth)", "ycbv_ideal (ideal depth)"]
-    assert f["finding@ablation"].startswith("The best of 2 variants on the validation split is + centroid offset (14.00 %)")
+    assert f["finding@ablation"].startswith(
+        "The best of 2 variants on the validation split is + centroid offset (14.00 %)"
+    )
     assert "paper's choices reach 3.00 %" in f["finding@ablation"]
     abl = report.write_ablation_table(d, "cpu", tmp_path / "a.csv", tmp_path / "a.tex")
     assert [r["val_add"] for r in abl] == [3.0, 14.0] and "centroid offset" in (tmp_path / "a.tex").read_text()

@@ -13,8 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sixdpose.reporting.readme import BLOCKS, main as readme_main, render_block, stale_blocks
 from sixdpose.artifacts.results import ResultError, read_result, write_result
+from sixdpose.reporting.readme import BLOCKS, render_block, stale_blocks
+from sixdpose.reporting.readme import main as readme_main
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -43,10 +44,18 @@ def test_every_result_file_reads():
 def test_round_trip_provenance_and_csv(tmp_path):
     inp = tmp_path / "in.csv"
     inp.write_text("a,b\n1,2\n")
-    p = write_result("bench_x", {"acc": 93.5, "missing": float("nan"), "n": np.int64(7), "v": np.float32(0.5)},
-                     rows=[{"method": "ransac", "ips": np.float64(10.4)}, {"method": "fgr", "ips": float("inf"), "extra": [1, 2]}],
-                     units={"acc": "%", "ips": "instances/s"}, description="a test", results_dir=tmp_path / "res",
-                     command=["python", "benchmarks/x.py", "--stride", "5"], config={"stride": 5}, inputs=[inp], notes="n")
+    p = write_result(
+        "bench_x",
+        {"acc": 93.5, "missing": float("nan"), "n": np.int64(7), "v": np.float32(0.5)},
+        rows=[{"method": "ransac", "ips": np.float64(10.4)}, {"method": "fgr", "ips": float("inf"), "extra": [1, 2]}],
+        units={"acc": "%", "ips": "instances/s"},
+        description="a test",
+        results_dir=tmp_path / "res",
+        command=["python", "benchmarks/x.py", "--stride", "5"],
+        config={"stride": 5},
+        inputs=[inp],
+        notes="n",
+    )
     assert p == tmp_path / "res" / "bench_x.json"
     r = read_result("bench_x", tmp_path / "res")
     assert r.figures == {"acc": 93.5, "missing": None, "n": 7, "v": 0.5}
@@ -59,7 +68,7 @@ def test_round_trip_provenance_and_csv(tmp_path):
     assert prov["commit"] is None or re.fullmatch(r"[0-9a-f]{40}", prov["commit"])
     assert prov["dirty"] in (True, False, None)
     when = dt.datetime.fromisoformat(prov["date"].replace("Z", "+00:00"))
-    assert abs((dt.datetime.now(dt.timezone.utc) - when).total_seconds()) < 120
+    assert abs((dt.datetime.now(dt.UTC) - when).total_seconds()) < 120
     hw = prov["hardware"]
     assert hw["cpu"] and hw["cpu_count"] >= 1 and isinstance(hw["gpus"], list) and "ram_gib" in hw
     text = p.read_text()
@@ -113,13 +122,23 @@ def test_bad_result_files_are_one_line_errors_naming_the_file(tmp_path):
     with pytest.raises(ResultError, match=r"other\.json: not a sixdpose result file"):
         read_result("other", tmp_path)
     (tmp_path / "noprov.json").write_text('{"format": "sixdpose-result", "version": 1, "provenance": {"date": "x"}}')
-    with pytest.raises(ResultError, match=r"noprov\.json: corrupt result file \(provenance lacks commit, dirty, hardware, command\)"):
+    with pytest.raises(
+        ResultError, match=r"noprov\.json: corrupt result file \(provenance lacks commit, dirty, hardware, command\)"
+    ):
         read_result("noprov", tmp_path)
     (tmp_path / "future.json").write_text('{"format": "sixdpose-result", "version": 99}')
     with pytest.raises(ResultError, match=r"future\.json: result format version 99"):
         read_result("future", tmp_path)
-    (tmp_path / "rows.json").write_text(json.dumps({"format": "sixdpose-result", "version": 1, "rows": [1, 2],
-                                                    "provenance": dict.fromkeys(["commit", "dirty", "date", "hardware", "command"])}))
+    (tmp_path / "rows.json").write_text(
+        json.dumps(
+            {
+                "format": "sixdpose-result",
+                "version": 1,
+                "rows": [1, 2],
+                "provenance": dict.fromkeys(["commit", "dirty", "date", "hardware", "command"]),
+            }
+        )
+    )
     with pytest.raises(ResultError, match=r"rows\.json: corrupt result file \(figures"):
         read_result("rows", tmp_path)
 
@@ -219,7 +238,9 @@ def test_evaluate_writes_a_result(tmp_path, capsys):
 
     syn = write_synthetic_dataset(tmp_path / "syn", n_images=2)
     ds = open_dataset(syn)
-    rows = [PoseEstimate(s.scene_id, s.im_id, i.obj_id, 1.0, i.R, i.t, 0.25) for s in (ds[0], ds[1]) for i in s.instances]
+    rows = [
+        PoseEstimate(s.scene_id, s.im_id, i.obj_id, 1.0, i.R, i.t, 0.25) for s in (ds[0], ds[1]) for i in s.instances
+    ]
     write_results(rows, tmp_path / "r.csv")
     base = ["evaluate", "--data", str(syn), "--results", str(tmp_path / "r.csv"), "--min-px", "0", "--no-bop",
             "--out", str(tmp_path / "ev"), "--results-dir", str(tmp_path / "results")]

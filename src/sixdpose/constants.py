@@ -28,7 +28,9 @@ TARGET_OBJECTS: tuple[str, ...] = (
 
 #: Merged-mask code of each target: pixel value = code - instance number (section III-C).
 MERGED_MASK_CODES: dict[str, int] = dict(
-    zip(TARGET_OBJECTS, (14, 28, 42, 56, 70, 85, 99, 113, 127, 141, 155, 170, 184, 198, 212, 226, 240, 255))
+    zip(
+        TARGET_OBJECTS, (14, 28, 42, 56, 70, 85, 99, 113, 127, 141, 155, 170, 184, 198, 212, 226, 240, 255), strict=True
+    )
 )
 
 
@@ -53,10 +55,10 @@ def merged_mask_codes(names, max_instances: int = 4) -> dict[str, int]:
     if n == 0:
         raise ValueError("no target objects")
     codes = [(255 * k) // n for k in range(1, n + 1)]
-    if codes[0] < max_instances or min(b - a for a, b in zip([0] + codes, codes)) < max_instances:
+    if codes[0] < max_instances or min(b - a for a, b in zip([0] + codes, codes, strict=False)) < max_instances:
         raise ValueError(f"{n} target objects with up to {max_instances} instances each do not fit the uint8 merged "
                          f"masks (at most {255 // max_instances} targets)")
-    return dict(zip(names, codes))
+    return dict(zip(names, codes, strict=True))
 
 #: At most this many instances of one object per scene (section III-C).
 MAX_INSTANCES_PER_OBJECT = 4

@@ -10,7 +10,6 @@ import csv
 import logging
 import os
 import random
-import sys
 from datetime import timedelta
 from pathlib import Path
 
@@ -33,7 +32,11 @@ class RunError(SixdposeError):
 
 def dist_info() -> tuple[int, int, int]:
     """``(world size, rank, local rank)`` from torchrun's environment (1, 0, 0 without torchrun)."""
-    return int(os.environ.get("WORLD_SIZE", "1")), int(os.environ.get("RANK", "0")), int(os.environ.get("LOCAL_RANK", "0"))
+    return (
+        int(os.environ.get("WORLD_SIZE", "1")),
+        int(os.environ.get("RANK", "0")),
+        int(os.environ.get("LOCAL_RANK", "0")),
+    )
 
 
 def pick_device(name: str | None = None, local_rank: int = 0) -> torch.device:
@@ -94,7 +97,9 @@ def resolve_checkpoint(path: str | Path, error=RunError) -> Path:
     return path
 
 
-def load_checkpoint(path: str | Path, fmt: str, version: int, required: tuple[str, ...], what: str, error=RunError) -> dict:
+def load_checkpoint(
+    path: str | Path, fmt: str, version: int, required: tuple[str, ...], what: str, error=RunError
+) -> dict:
     """Read a checkpoint (file or run directory) onto the CPU and check its format tag, version and keys.
 
     Args:

@@ -13,12 +13,34 @@ the synthetic layout              :mod:`sixdpose.datasets.layout`  ``generate`` 
 """
 
 from .poses import RESULTS_HEADER, PoseEstimate, read_results, write_results
-from .predictions import Detection, list_predictions, prediction_path, read_predictions, read_predictions_meta, write_predictions, write_predictions_meta
+from .predictions import (
+    Detection,
+    list_predictions,
+    prediction_path,
+    read_predictions,
+    read_predictions_meta,
+    write_predictions,
+    write_predictions_meta,
+)
 from .results import Result, ResultError, read_result, write_result
 from .tables import tex_escape, write_table
 
 __all__ = [
-    "RESULTS_HEADER", "Detection", "PoseEstimate", "Result", "ResultError", "list_predictions", "prediction_path", "read_predictions",
-    "read_predictions_meta", "read_result", "read_results", "tex_escape", "write_predictions", "write_predictions_meta",
-    "write_result", "write_results", "write_table",
+    "RESULTS_HEADER",
+    "Detection",
+    "PoseEstimate",
+    "Result",
+    "ResultError",
+    "list_predictions",
+    "prediction_path",
+    "read_predictions",
+    "read_predictions_meta",
+    "read_result",
+    "read_results",
+    "tex_escape",
+    "write_predictions",
+    "write_predictions_meta",
+    "write_result",
+    "write_results",
+    "write_table",
 ]

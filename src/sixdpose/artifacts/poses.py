@@ -59,7 +59,7 @@ class PoseEstimate:
         return X_from(self.R, self.t)
 
     @classmethod
-    def failed(cls, scene_id: int, im_id: int, obj_id: int, reason: str) -> "PoseEstimate":
+    def failed(cls, scene_id: int, im_id: int, obj_id: int, reason: str) -> PoseEstimate:
         """A score-0 row (identity pose) recording why no estimate could be made."""
         return cls(int(scene_id), int(im_id), int(obj_id), 0.0, np.eye(3), np.zeros(3), 0.0, reason)
 

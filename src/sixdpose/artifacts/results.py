@@ -123,7 +123,7 @@ def source_root() -> Path | None:
     if not top:
         return None
     root = Path(top).resolve()
-    return root if _SRC == (root / "src" / "sixdpose").resolve() else None
+    return root if (root / "src" / "sixdpose").resolve() == _SRC else None
 
 
 def git_state(root: Path | None = None) -> tuple[str | None, bool | None]:
@@ -249,7 +249,7 @@ def provenance(command: list[str] | None = None) -> dict:
     return {
         "commit": commit,
         "dirty": dirty,
-        "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z"),
+        "date": _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat().replace("+00:00", "Z"),
         "sixdpose": __version__,
         "python": platform.python_version(),
         "hardware": hardware(),
@@ -293,7 +293,9 @@ def _plain(v, where: str):
         return _plain(v.tolist(), where)
     if hasattr(v, "to_dict"):  # a Config
         return _plain(v.to_dict(), where)
-    raise ResultError(f"result value {where} has type {type(v).__name__}, which cannot be stored (numbers, strings, lists, dicts)")
+    raise ResultError(
+        f"result value {where} has type {type(v).__name__}, which cannot be stored (numbers, strings, lists, dicts)"
+    )
 
 
 def result_path(name: str, results_dir: str | Path = DEFAULT_DIR) -> Path:
@@ -315,7 +317,9 @@ def _csv_text(rows: list[dict]) -> str:
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(cols)
     for r in rows:
-        w.writerow(["" if r.get(c) is None else (json.dumps(r[c]) if isinstance(r[c], (list, dict)) else r[c]) for c in cols])
+        w.writerow(
+            ["" if r.get(c) is None else (json.dumps(r[c]) if isinstance(r[c], (list, dict)) else r[c]) for c in cols]
+        )
     return buf.getvalue()
 
 
@@ -353,7 +357,9 @@ def write_result(name: str, content=None, *, rows=None, units: dict | None = Non
     elif content is None or isinstance(content, dict):
         figures, rows = dict(content or {}), list(rows or [])
     else:
-        raise ResultError(f"result {name}: content must be a dict of figures or a list of row dicts, not {type(content).__name__}")
+        raise ResultError(
+            f"result {name}: content must be a dict of figures or a list of row dicts, not {type(content).__name__}"
+        )
     if not all(isinstance(r, dict) for r in rows):
         raise ResultError(f"result {name}: every row must be a dict (column -> value)")
     doc = {
@@ -399,7 +405,9 @@ def read_result(name: str | Path, results_dir: str | Path = DEFAULT_DIR) -> Resu
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ResultError(f"{path}: not a sixdpose result file (no \"format\": \"{FORMAT}\")")
     if not isinstance(doc.get("version"), int) or doc["version"] > VERSION:
-        raise ResultError(f"{path}: result format version {doc.get('version')!r} is not supported (this sixdpose reads <= {VERSION})")
+        raise ResultError(
+            f"{path}: result format version {doc.get('version')!r} is not supported (this sixdpose reads <= {VERSION})"
+        )
     prov = doc.get("provenance")
     missing = [k for k in PROVENANCE_KEYS if not isinstance(prov, dict) or k not in prov]
     if missing:

@@ -6,4 +6,13 @@
 from .base import DatasetError, DatasetReader, Instance, ObjectModel, Sample, collate_samples
 from .readers import as_reader, open_dataset
 
-__all__ = ["DatasetError", "DatasetReader", "Instance", "ObjectModel", "Sample", "as_reader", "collate_samples", "open_dataset"]
+__all__ = [
+    "DatasetError",
+    "DatasetReader",
+    "Instance",
+    "ObjectModel",
+    "Sample",
+    "as_reader",
+    "collate_samples",
+    "open_dataset",
+]

@@ -218,7 +218,7 @@ def read_mask(path: str | Path) -> np.ndarray:
     return a > 0
 
 
-def check_depth_scale(reader: "DatasetReader", n_images: int = 3, low: float = 0.5, high: float = 2.0) -> float | None:
+def check_depth_scale(reader: DatasetReader, n_images: int = 3, low: float = 0.5, high: float = 2.0) -> float | None:
     """Guard against a wrong depth unit: compare the median masked depth of annotated instances with
     their ground-truth distance ``t_z`` on the first ``n_images`` images that have both.
 
@@ -253,7 +253,9 @@ def check_depth_scale(reader: "DatasetReader", n_images: int = 3, low: float = 0
         return None
     r = float(np.median(ratios))
     if not low <= r <= high:
-        raise DatasetError(f"{reader.location}: depth looks wrongly scaled: the masked depth is {r:.3g} x the ground-truth "
-                           "distance of the objects (check the depth unit: metres in the synthetic layout, "
-                           "depth_scale in BOP scene_camera.json)")
+        raise DatasetError(
+            f"{reader.location}: depth looks wrongly scaled: the masked depth is {r:.3g} x the ground-truth "
+            "distance of the objects (check the depth unit: metres in the synthetic layout, "
+            "depth_scale in BOP scene_camera.json)"
+        )
     return r

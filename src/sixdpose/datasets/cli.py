@@ -7,8 +7,11 @@ from .. import options as O
 
 def register(sub) -> None:
     """Add the ``export-bop`` subcommand."""
-    p = sub.add_parser("export-bop", help="export a synthetic dataset to the BOP format",
-                       description="Write DIR (synthetic layout) as a BOP dataset: models in mm, 16-bit depth, mask_visib.")
+    p = sub.add_parser(
+        "export-bop",
+        help="export a synthetic dataset to the BOP format",
+        description="Write DIR (synthetic layout) as a BOP dataset: models in mm, 16-bit depth, mask_visib.",
+    )
     O.add(p, "--data", help="synthetic dataset directory")
     O.add(p, "--out", help="BOP dataset root to create")
     O.add(p, "--split", help="split folder name to write (default test)")
@@ -20,8 +23,8 @@ def register(sub) -> None:
 
 def _run(args) -> int:
     from ..fileio import claim_output_dir
-    from .readers import open_dataset
     from .bop import export_bop
+    from .readers import open_dataset
 
     claim_output_dir(args.out, "export-bop", create=False)  # refuse an unusable --out before reading the dataset
     ds = open_dataset(args.data)

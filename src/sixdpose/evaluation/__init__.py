@@ -5,7 +5,9 @@ load scipy."""
 
 import importlib
 
-_LAZY = {name: "metrics" for name in ("add", "add_or_adds", "adds", "is_correct", "rotation_error", "translation_error")}
+_LAZY = {
+    name: "metrics" for name in ("add", "add_or_adds", "adds", "is_correct", "rotation_error", "translation_error")
+}
 
 
 def __getattr__(name):

@@ -79,9 +79,15 @@ def _run(args) -> int:
         print(f"not scored: {res.n_rejected} rejected row(s){first}; {res.n_duplicates} repeated pose(s) counted once")
     if res.bop:
         b = res.bop
-        print(f"BOP: AR {b['ar']:.2f} (VSD {b['ar_vsd']:.2f}, MSSD {b['ar_mssd']:.2f}, MSPD {b['ar_mspd']:.2f}); "
-              f"ADD-S AUC {b['adds_auc']:.2f}" + (f"; symmetric without annotation (identity only in MSSD/MSPD): "
-                                                  f"{b['unannotated_symmetric_ids']}" if b["unannotated_symmetric_ids"] else ""))
+        print(
+            f"BOP: AR {b['ar']:.2f} (VSD {b['ar_vsd']:.2f}, MSSD {b['ar_mssd']:.2f}, MSPD {b['ar_mspd']:.2f}); "
+            f"ADD-S AUC {b['adds_auc']:.2f}"
+            + (
+                f"; symmetric without annotation (identity only in MSSD/MSPD): {b['unannotated_symmetric_ids']}"
+                if b["unannotated_symmetric_ids"]
+                else ""
+            )
+        )
     for oid, v in res.per_object.items():
         extra = f"  AR {v['bop']['ar']:6.2f}  ADD-S AUC {v['bop']['adds_auc']:6.2f}" if "bop" in v else ""
         print(f"  {oid:>3} {v['name']:<28} {v['n_correct']:>4}/{v['n_gt']:<4} {v['accuracy']:6.2f}%{extra}")

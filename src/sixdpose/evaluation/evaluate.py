@@ -231,7 +231,9 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
     known = set(keys)
     unknown = [k for k in row_time if k not in known]
     if unknown:
-        raise EvaluationError(f"results refer to image(s) not in {dataset.location}, e.g. scene {unknown[0][0]} image {unknown[0][1]}")
+        raise EvaluationError(
+            f"results refer to image(s) not in {dataset.location}, e.g. scene {unknown[0][0]} image {unknown[0][1]}"
+        )
     n_gt_obj: dict[int, int] = defaultdict(int)
     n_ok_obj: dict[int, int] = defaultdict(int)
     records = []
@@ -255,7 +257,9 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
             g_o = [g for g in gts if g.obj_id == oid]
             e_o = sorted((e for e in ests if e.obj_id == oid and e.score > 0), key=lambda e: -e.score)[: len(g_o)]
             model = dataset.model(oid)
-            err = np.array([[metrics.add_or_adds(e.R, e.t, g.R, g.t, model.points, model.symmetric) for g in g_o] for e in e_o]).reshape(len(e_o), len(g_o))
+            err = np.array(
+                [[metrics.add_or_adds(e.R, e.t, g.R, g.t, model.points, model.symmetric) for g in g_o] for e in e_o]
+            ).reshape(len(e_o), len(g_o))
             rel_err.append(err / model.diameter)
             match_est = greedy_match(err, threshold * model.diameter)
             for j, g in enumerate(g_o):
@@ -268,11 +272,18 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
                     if oid not in syms:
                         syms[oid] = bop_scores.model_symmetries(model, dataset.location)
                     with_vsd = sample.depth is not None and model.mesh is not None
-                    bop_err[oid].append(bop_scores.instance_errors(sample, g, model, records[-1].estimate, syms[oid], with_vsd))
+                    bop_err[oid].append(
+                        bop_scores.instance_errors(sample, g, model, records[-1].estimate, syms[oid], with_vsd)
+                    )
                 n_gt_obj[oid] += 1
                 n_ok_obj[oid] += int(ok)
     per_object = {
-        oid: {"name": names.get(oid, str(oid)), "n_gt": n_gt_obj[oid], "n_correct": n_ok_obj[oid], "accuracy": 100.0 * n_ok_obj[oid] / n_gt_obj[oid]}
+        oid: {
+            "name": names.get(oid, str(oid)),
+            "n_gt": n_gt_obj[oid],
+            "n_correct": n_ok_obj[oid],
+            "accuracy": 100.0 * n_ok_obj[oid] / n_gt_obj[oid],
+        }
         for oid in sorted(n_gt_obj)
     }
     bop_all: dict = {}
@@ -296,7 +307,9 @@ def evaluate(dataset: DatasetReader | str | Path, estimates: list[PoseEstimate],
     return EvalResult(
         per_object=per_object,
         accuracy=100.0 * n_ok / n_gt if n_gt else float("nan"),
-        mean_object_accuracy=float(np.mean([v["accuracy"] for v in per_object.values()])) if per_object else float("nan"),
+        mean_object_accuracy=float(np.mean([v["accuracy"] for v in per_object.values()]))
+        if per_object
+        else float("nan"),
         n_gt=n_gt,
         n_correct=n_ok,
         fps=len(img_time) / total if total > 0 else float("nan"),
@@ -344,8 +357,17 @@ def table_rows(res: EvalResult) -> list[dict]:
     ``add_s_accuracy`` in %, and the BOP scores in % when computed), then ``obj_id="all"`` (mean over
     GT instances) and ``obj_id="objects"`` (mean over objects; counts empty)."""
     bop_cols = ["ar", "ar_vsd", "ar_mssd", "ar_mspd", "adds_auc"] if res.bop else []
-    rows = [{"obj_id": oid, "name": v["name"], "n_gt": v["n_gt"], "n_correct": v["n_correct"], "add_s_accuracy": v["accuracy"],
-             **{c: v["bop"][c] for c in bop_cols}} for oid, v in res.per_object.items()]
+    rows = [
+        {
+            "obj_id": oid,
+            "name": v["name"],
+            "n_gt": v["n_gt"],
+            "n_correct": v["n_correct"],
+            "add_s_accuracy": v["accuracy"],
+            **{c: v["bop"][c] for c in bop_cols},
+        }
+        for oid, v in res.per_object.items()
+    ]
     rows.append({"obj_id": "all", "name": "mean over instances", "n_gt": res.n_gt, "n_correct": res.n_correct,
                  "add_s_accuracy": res.accuracy, **{c: res.bop[c] for c in bop_cols}})
     rows.append({"obj_id": "objects", "name": "mean over objects", "n_gt": "", "n_correct": "",
@@ -365,14 +387,30 @@ def write_tables(res: EvalResult, out_dir: str | Path, label: str = "method") ->
     bop_cols = ["ar", "ar_vsd", "ar_mssd", "ar_mspd", "adds_auc"] if res.bop else []
     rows = table_rows(res)
     paths = {"per_object": out / "add_s_per_object.csv", "latex": out / "add_s.tex"}
-    write_table(rows, ["obj_id", "name", "n_gt", "n_correct", "add_s_accuracy"] + bop_cols, paths["per_object"], paths["latex"],
-                headers=["Id", "Object", "GT instances", "Correct", "ADD(-S) (\\%)"]
-                + ["AR", "AR$_{VSD}$", "AR$_{MSSD}$", "AR$_{MSPD}$", "ADD-S AUC"][: len(bop_cols)],
-                comment=f"{label}: FPS {res.fps:.3f}, instances/s {res.instances_per_s:.3f}")
+    write_table(
+        rows,
+        ["obj_id", "name", "n_gt", "n_correct", "add_s_accuracy"] + bop_cols,
+        paths["per_object"],
+        paths["latex"],
+        headers=["Id", "Object", "GT instances", "Correct", "ADD(-S) (\\%)"]
+        + ["AR", "AR$_{VSD}$", "AR$_{MSSD}$", "AR$_{MSPD}$", "ADD-S AUC"][: len(bop_cols)],
+        comment=f"{label}: FPS {res.fps:.3f}, instances/s {res.instances_per_s:.3f}",
+    )
     paths["timing"] = out / "timing.csv"
-    write_table([{"method": label, "n_images": res.n_images, "n_estimates": res.n_estimates, "total_time_s": res.total_time,
-                  "fps": res.fps, "instances_per_s": res.instances_per_s}],
-                ["method", "n_images", "n_estimates", "total_time_s", "fps", "instances_per_s"], paths["timing"])
+    write_table(
+        [
+            {
+                "method": label,
+                "n_images": res.n_images,
+                "n_estimates": res.n_estimates,
+                "total_time_s": res.total_time,
+                "fps": res.fps,
+                "instances_per_s": res.instances_per_s,
+            }
+        ],
+        ["method", "n_images", "n_estimates", "total_time_s", "fps", "instances_per_s"],
+        paths["timing"],
+    )
     summary = json.dumps(_json_ready(dict(res.summary(), label=label)), indent=1, allow_nan=False)
     paths["summary"] = atomic_write_text(out / "summary.json", summary + "\n")  # NaN (undefined) -> null
     return paths

@@ -15,7 +15,9 @@ from ..constants import ADD_THRESHOLD
 
 def transform_pts(pts: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Apply ``p -> R p + t`` to (N, 3) points; returns (N, 3)."""
-    return np.asarray(pts, dtype=np.float64) @ np.asarray(R, dtype=np.float64).T + np.asarray(t, dtype=np.float64).reshape(1, 3)
+    return np.asarray(pts, dtype=np.float64) @ np.asarray(R, dtype=np.float64).T + np.asarray(
+        t, dtype=np.float64
+    ).reshape(1, 3)
 
 
 def add(R_est: np.ndarray, t_est: np.ndarray, R_gt: np.ndarray, t_gt: np.ndarray, pts: np.ndarray) -> float:
@@ -56,7 +58,9 @@ def rotation_error(R_est: np.ndarray, R_gt: np.ndarray) -> float:
 
 def translation_error(t_est: np.ndarray, t_gt: np.ndarray) -> float:
     """Euclidean distance between the translations (unit of the inputs)."""
-    return float(np.linalg.norm(np.asarray(t_est, dtype=np.float64).reshape(3) - np.asarray(t_gt, dtype=np.float64).reshape(3)))
+    return float(
+        np.linalg.norm(np.asarray(t_est, dtype=np.float64).reshape(3) - np.asarray(t_gt, dtype=np.float64).reshape(3))
+    )
 
 
 # --- BOP 2019 metrics ---
@@ -400,10 +404,7 @@ def vsd(
         dists = dists / float(diameter)
     errors = []
     for tau in taus:
-        if cost_type == "step":
-            costs = dists >= tau
-        else:
-            costs = np.minimum(dists / tau, 1.0)
+        costs = dists >= tau if cost_type == "step" else np.minimum(dists / tau, 1.0)
         errors.append(float((np.sum(costs) + comp_count) / float(union_count)))
     return errors
 

@@ -58,15 +58,26 @@ def gt_surface_errors(dataset_dir: str | Path, assets: str | Path | None = None,
             if inst.obj_name not in scenes:
                 m = mesh_of(inst.obj_name)
                 rs = o3d.t.geometry.RaycastingScene()
-                rs.add_triangles(o3d.core.Tensor(m.vertices.astype(np.float32)), o3d.core.Tensor(m.faces.astype(np.uint32)))
+                rs.add_triangles(
+                    o3d.core.Tensor(m.vertices.astype(np.float32)), o3d.core.Tensor(m.faces.astype(np.uint32))
+                )
                 scenes[inst.obj_name] = rs
             p_C = backproject(s.depth, s.K, inst.mask)[0]
             if len(p_C) == 0:
                 continue
             p_O = (p_C - inst.t) @ inst.R  # R^T (p - t)
             d = scenes[inst.obj_name].compute_distance(o3d.core.Tensor(p_O.astype(np.float32))).numpy()
-            out.append({"im_id": s.im_id, "obj_name": inst.obj_name, "obj_id": inst.obj_id, "inst": inst.inst, "n": len(d),
-                        "mean": float(d.mean()), "median": float(np.median(d))})
+            out.append(
+                {
+                    "im_id": s.im_id,
+                    "obj_name": inst.obj_name,
+                    "obj_id": inst.obj_id,
+                    "inst": inst.inst,
+                    "n": len(d),
+                    "mean": float(d.mean()),
+                    "median": float(np.median(d)),
+                }
+            )
     return out
 
 
@@ -98,7 +109,9 @@ def box_penetration(X_a: np.ndarray, size_a: np.ndarray, X_b: np.ndarray, size_b
     return float(best)
 
 
-def resting_penetrations(dataset_dir: str | Path, assets: str | Path | None = None, bop_models: str | Path | None = None) -> dict:
+def resting_penetrations(
+    dataset_dir: str | Path, assets: str | Path | None = None, bop_models: str | Path | None = None
+) -> dict:
     """Worst penetrations after settling, from the final poses in ``manifest.json`` (``bop_models``:
     the BOP models directory of a dataset with BOP targets).
 
@@ -125,7 +138,10 @@ def resting_penetrations(dataset_dir: str | Path, assets: str | Path | None = No
             pr = physical_properties(mesh_of(o["name"]), 1.0)  # the box only: the mass does not matter
             R_WO, t_WO = np.asarray(o["R_WO"], dtype=float), np.asarray(o["t_WO"], dtype=float)
             Xc = X_from(R_WO, R_WO @ pr.box_center + t_WO)  # the object's box in the world
-            corners = (Xc[:3, :3] @ (np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)]) * pr.box_size / 2).T).T + Xc[:3, 3]
+            corners = (
+                Xc[:3, :3]
+                @ (np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)]) * pr.box_size / 2).T
+            ).T + Xc[:3, 3]
             over_table = (np.abs(corners[:, 0]) < hx) & (np.abs(corners[:, 1]) < hy)
             on_table = Xc[2, 3] > cfg.table_height and abs(Xc[0, 3]) < hx and abs(Xc[1, 3]) < hy
             if on_table and over_table.any():

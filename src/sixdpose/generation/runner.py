@@ -20,15 +20,15 @@ import numpy as np
 from .. import __version__
 from ..assets import load_mesh, physical_properties, point_cloud_diameter, resolve_assets_dir, sample_surface
 from ..assets.bop import resolve_bop_models_dir
+from ..datasets.layout import model_file, write_models_info
+from ..datasets.ply import write_ply
+from ..errors import SixdposeError
+from ..fileio import atomic_write_text, claim_output_dir, write_if_changed
 from .config import GenerationConfig
 from .config import profile as get_profile
 from .objects import ObjectSet, resolve_objects
 from .scene import camera_arc, sample_scene, scene_rng
 from .sensors import sensor_rng, simulate_depth
-from ..datasets.layout import model_file, write_models_info
-from ..datasets.ply import write_ply
-from ..errors import SixdposeError
-from ..fileio import atomic_write_text, claim_output_dir, write_if_changed
 from .writer import PARTIAL, RECORDS, commit_scene, finalize, read_records, scene_files, write_attribution
 
 CONFIG_FILE = "config.yml"
@@ -61,7 +61,7 @@ def _rows(a) -> list:
     return [[float(x) for x in row] for row in np.asarray(a, dtype=np.float64)]
 
 
-def render_scene(root: Path, cfg: GenerationConfig, objects: "ObjectSet | Path", scene: int) -> dict:
+def render_scene(root: Path, cfg: GenerationConfig, objects: ObjectSet | Path, scene: int) -> dict:
     """Simulate, render and commit scene ``scene`` into dataset ``root``.
 
     Args:
@@ -89,7 +89,9 @@ def render_scene(root: Path, cfg: GenerationConfig, objects: "ObjectSet | Path",
             if res.at_rest:
                 break
         else:
-            raise RuntimeError(f"not at rest after {cfg.sim_time} s (or the simulation diverged) in {cfg.max_attempts} attempts")
+            raise RuntimeError(
+                f"not at rest after {cfg.sim_time} s (or the simulation diverged) in {cfg.max_attempts} attempts"
+            )
         views, images = {}, []
         for v, X_WC in enumerate(cams):
             im_id = scene * cfg.views + v
@@ -201,7 +203,9 @@ def check_models(root: Path, objects: ObjectSet) -> None:
     diff = sorted(n for n in set(have) | set(want) if n not in have or n not in want or have[n][0] != want[n][0]
                   or (have[n][1] is not None and have[n][1] != want[n][1]))
     if diff:
-        raise GenerationError(f"{path}: the dataset was made with other target models ({', '.join(diff[:5])}); use another --out")
+        raise GenerationError(
+            f"{path}: the dataset was made with other target models ({', '.join(diff[:5])}); use another --out"
+        )
 
 
 def prepare_output(out: Path, cfg: GenerationConfig) -> bool:
@@ -223,8 +227,14 @@ def prepare_output(out: Path, cfg: GenerationConfig) -> bool:
         except SixdposeError as e:
             raise GenerationError(f"unreadable dataset config ({e})") from None
         if old.replace(scenes=cfg.scenes) != cfg:
-            diff = [f.name for f in dataclasses.fields(cfg) if getattr(old, f.name) != getattr(cfg, f.name) and f.name != "scenes"]
-            raise GenerationError(f"{out}: holds a dataset made with a different config ({', '.join(diff)}); use another --out")
+            diff = [
+                f.name
+                for f in dataclasses.fields(cfg)
+                if getattr(old, f.name) != getattr(cfg, f.name) and f.name != "scenes"
+            ]
+            raise GenerationError(
+                f"{out}: holds a dataset made with a different config ({', '.join(diff)}); use another --out"
+            )
     return resume
 
 
@@ -296,7 +306,9 @@ def generate(
         images += r["images"]
         bar.update(1)
         el = time.perf_counter() - t0
-        bar.set_postfix_str(f"{images / el:.2f} img/s" + (f", {sum(not x['ok'] for x in results)} failed" if not r["ok"] else ""))
+        bar.set_postfix_str(
+            f"{images / el:.2f} img/s" + (f", {sum(not x['ok'] for x in results)} failed" if not r["ok"] else "")
+        )
         if not r["ok"]:
             bar.write(f"scene {r['scene']} failed: {r['error']}")
     bar.close()
@@ -411,8 +423,12 @@ def ensure_dataset(path: str | os.PathLike, profile: str = "smoke", workers: int
     """
     path = Path(path)
     cfg = get_profile(profile, **overrides)
-    if (path / "gt.yml").is_file() and (path / CONFIG_FILE).is_file():
-        if GenerationConfig.load(path / CONFIG_FILE) == cfg and len(read_records(path)) >= cfg.scenes:
-            return path
+    if (
+        (path / "gt.yml").is_file()
+        and (path / CONFIG_FILE).is_file()
+        and GenerationConfig.load(path / CONFIG_FILE) == cfg
+        and len(read_records(path)) >= cfg.scenes
+    ):
+        return path
     generate(path, cfg, workers=workers or min(2, os.cpu_count() or 1))
     return path

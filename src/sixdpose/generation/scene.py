@@ -53,7 +53,9 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
     )
 
 
-def draw_objects(rng: np.random.Generator, cfg: GenerationConfig, targets: list[str], noise: list[str]) -> list[tuple[str, str]]:
+def draw_objects(
+    rng: np.random.Generator, cfg: GenerationConfig, targets: list[str], noise: list[str]
+) -> list[tuple[str, str]]:
     """Draw ``(name, role)`` of the scene's objects: targets and noise objects with repeats, at most
     ``cfg.max_instances`` of one name."""
     out: list[tuple[str, str]] = []

@@ -116,7 +116,9 @@ class SceneSimulator:
         cfg: generator configuration.
     """
 
-    def __init__(self, specs: list[ObjectSpec], props: dict[str, PhysicalProperties], mesh_paths: dict, cfg: GenerationConfig):
+    def __init__(
+        self, specs: list[ObjectSpec], props: dict[str, PhysicalProperties], mesh_paths: dict, cfg: GenerationConfig
+    ):
         from pydrake.geometry import AddContactMaterial, Box, ProximityProperties, Sphere
         from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlantConfig
         from pydrake.multibody.tree import RotationalInertia, SpatialInertia
@@ -146,14 +148,18 @@ class SceneSimulator:
         for k, s in enumerate(specs):
             pr = props[s.name]
             inst = plant.AddModelInstance(f"obj{k}")
-            I = pr.inertia
+            Ic = pr.inertia
             M = SpatialInertia.MakeFromCentralInertia(
-                pr.mass, pr.com, RotationalInertia(I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])
+                pr.mass, pr.com, RotationalInertia(Ic[0, 0], Ic[1, 1], Ic[2, 2], Ic[0, 1], Ic[0, 2], Ic[1, 2])
             )
             body = plant.AddRigidBody(f"{s.name}_{s.inst}", inst, M)
-            plant.RegisterCollisionGeometry(body, _rt(_translation(pr.box_center)), Box(*pr.box_size), f"box{k}", proximity())
+            plant.RegisterCollisionGeometry(
+                body, _rt(_translation(pr.box_center)), Box(*pr.box_size), f"box{k}", proximity()
+            )
             for j, p in enumerate(_contact_points(pr.box_center, pr.box_size, cfg.contact_points_per_edge)):
-                plant.RegisterCollisionGeometry(body, _rt(_translation(p)), Sphere(_CONTACT_SPHERE_RADIUS), f"pt{k}_{j}", proximity())
+                plant.RegisterCollisionGeometry(
+                    body, _rt(_translation(p)), Sphere(_CONTACT_SPHERE_RADIUS), f"pt{k}_{j}", proximity()
+                )
             self.bodies.append(body)
         plant.Finalize()
 
@@ -162,7 +168,7 @@ class SceneSimulator:
         self.simulator = Simulator(self.diagram)
         self.context = self.simulator.get_mutable_context()
         self.plant_context = plant.GetMyMutableContextFromRoot(self.context)
-        for body, s in zip(self.bodies, specs):
+        for body, s in zip(self.bodies, specs, strict=True):
             plant.SetFreeBodyPose(self.plant_context, body, _rt(s.X_WO))
         self._result: SettleResult | None = None
 
@@ -222,11 +228,11 @@ class PoolRenderer:
     Labels are mapped back to the scene's numbering: object k of the scene has label k + 1.
     """
 
-    _instance: "PoolRenderer | None" = None
+    _instance: PoolRenderer | None = None
     _key = None
 
     @classmethod
-    def get(cls, cfg: GenerationConfig) -> "PoolRenderer":
+    def get(cls, cfg: GenerationConfig) -> PoolRenderer:
         """The process-wide renderer for ``cfg``'s camera and static scene (rebuilt if they change)."""
         key = (cfg.camera, cfg.table_size, cfg.table_height, cfg.max_instances, tuple(sorted(_ALL_NAMES.items())))
         if cls._instance is None or cls._key != key:
@@ -235,8 +241,18 @@ class PoolRenderer:
 
     def __init__(self, cfg: GenerationConfig):
         from pydrake.geometry import (
-            Box, ClippingRange, ColorRenderCamera, DepthRange, DepthRenderCamera, GeometryInstance,
-            MakeRenderEngineVtk, PerceptionProperties, RenderCameraCore, RenderEngineVtkParams, RenderLabel, Rgba,
+            Box,
+            ClippingRange,
+            ColorRenderCamera,
+            DepthRange,
+            DepthRenderCamera,
+            GeometryInstance,
+            MakeRenderEngineVtk,
+            PerceptionProperties,
+            RenderCameraCore,
+            RenderEngineVtkParams,
+            RenderLabel,
+            Rgba,
             SceneGraph,
         )
         from pydrake.systems.framework import DiagramBuilder
@@ -265,7 +281,11 @@ class PoolRenderer:
         self._depth = DepthRenderCamera(core, DepthRange(cam.near, cam.far))
         self._lut = None
         self.owner = None  #: the SceneSimulator whose scene is placed
-        self._GeometryInstance, self._PerceptionProperties, self._RenderLabel = GeometryInstance, PerceptionProperties, RenderLabel
+        self._GeometryInstance, self._PerceptionProperties, self._RenderLabel = (
+            GeometryInstance,
+            PerceptionProperties,
+            RenderLabel,
+        )
 
     def _ensure_frames(self, names):
         """Register frames for every slot of ``names`` (before the diagram is built)."""
@@ -302,7 +322,9 @@ class PoolRenderer:
             if slot in placed:
                 k, X = placed[slot]
                 if slot not in self._loaded:
-                    gi = self._GeometryInstance(_rt(np.eye(4)), Mesh(str(mesh_paths[slot[0]])), f"mesh_{slot[0]}_{slot[1]}")
+                    gi = self._GeometryInstance(
+                        _rt(np.eye(4)), Mesh(str(mesh_paths[slot[0]])), f"mesh_{slot[0]}_{slot[1]}"
+                    )
                     pp = self._PerceptionProperties()
                     pp.AddProperty("label", "id", self._RenderLabel(j + 1))
                     gi.set_perception_properties(pp)

@@ -35,8 +35,19 @@ VARIANTS: dict[str, dict] = {
 COLUMNS = ("variant", "translation", "rotation", "norm", "epochs", "steps", "train_seconds", "val_add", "n_val")
 
 
-def run_ablation(train, val, out_dir, *, profile: str = "cpu", time_budget: float | None = None, variants: dict | None = None,
-                 min_px: int = MIN_VISIBLE_PX, val_images: int = 0, progress: bool = False, **overrides):
+def run_ablation(
+    train,
+    val,
+    out_dir,
+    *,
+    profile: str = "cpu",
+    time_budget: float | None = None,
+    variants: dict | None = None,
+    min_px: int = MIN_VISIBLE_PX,
+    val_images: int = 0,
+    progress: bool = False,
+    **overrides,
+):
     """Train each variant for the same budget and score it on ``val``.
 
     Args:
@@ -74,8 +85,17 @@ def run_ablation(train, val, out_dir, *, profile: str = "cpu", time_budget: floa
         metrics = [r for r in read_metrics(run) if r["val_add"] is None]
         est, _ = predict_dataset(val_r, run, iterations=0, limit=val_images)
         res = evaluate(val_r, est, min_px=min_px, images=val_r.keys()[:val_images] if val_images else None)
-        rows.append({"variant": name, "translation": cfg["translation"], "rotation": cfg["rotation"], "norm": cfg["norm"],
-                     "epochs": ckpt["epoch"], "steps": metrics[-1]["step"] if metrics else 0,
-                     "train_seconds": round(metrics[-1]["seconds"], 1) if metrics else 0.0,
-                     "val_add": round(res.accuracy, 2), "n_val": res.n_gt})
+        rows.append(
+            {
+                "variant": name,
+                "translation": cfg["translation"],
+                "rotation": cfg["rotation"],
+                "norm": cfg["norm"],
+                "epochs": ckpt["epoch"],
+                "steps": metrics[-1]["step"] if metrics else 0,
+                "train_seconds": round(metrics[-1]["seconds"], 1) if metrics else 0.0,
+                "val_add": round(res.accuracy, 2),
+                "n_val": res.n_gt,
+            }
+        )
     return pd.DataFrame(rows, columns=list(COLUMNS))

@@ -56,8 +56,12 @@ def check_refiner_matches(refiner: dict, pose: dict) -> None:
     classes and architecture."""
     want = refiner["pose"]
     if [list(c) for c in want["classes"]] != [list(c) for c in pose["classes"]]:
-        raise CheckpointError(f"{refiner['path']}: refiner trained for other object classes than the pose run {pose['path']}")
+        raise CheckpointError(
+            f"{refiner['path']}: refiner trained for other object classes than the pose run {pose['path']}"
+        )
     if dict(want["arch"]) != dict(pose["arch"]):
         diff = sorted(k for k in set(want["arch"]) | set(pose["arch"]) if want["arch"].get(k) != pose["arch"].get(k))
-        raise CheckpointError(f"{refiner['path']}: refiner trained on a pose run of another architecture than {pose['path']} "
-                              f"(differs in {', '.join(diff)})")
+        raise CheckpointError(
+            f"{refiner['path']}: refiner trained on a pose run of another architecture than {pose['path']} "
+            f"(differs in {', '.join(diff)})"
+        )

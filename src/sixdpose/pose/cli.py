@@ -72,9 +72,7 @@ def _cmd_predict(args) -> int:
 
     from ..artifacts.poses import RESULTS_HEADER, write_results
     from ..fileio import atomic_write_text, claim_output_file
-    from .infer import predict_dataset
-
-    from .infer import check_inference_overrides
+    from .infer import check_inference_overrides, predict_dataset
 
     setup_logging(args.verbose)
     overrides = check_inference_overrides(parse_overrides(args.overrides))  # a bad --set fails before any work
@@ -84,17 +82,30 @@ def _cmd_predict(args) -> int:
         import torch
 
         torch.set_num_threads(args.threads)
-    rows, est = predict_dataset(args.data, args.pose, refiner=args.refiner, masks=args.masks, iterations=args.iterations,
-                                icp=args.icp, colour_verify=args.colour_verify, device=args.device, split=args.split,
-                                limit=args.limit, score_thresh=args.score_thresh, progress=not args.no_progress,
-                                overrides=overrides)
+    rows, est = predict_dataset(
+        args.data,
+        args.pose,
+        refiner=args.refiner,
+        masks=args.masks,
+        iterations=args.iterations,
+        icp=args.icp,
+        colour_verify=args.colour_verify,
+        device=args.device,
+        split=args.split,
+        limit=args.limit,
+        score_thresh=args.score_thresh,
+        progress=not args.no_progress,
+        overrides=overrides,
+    )
     write_results(rows, out)
     settings = dict(est.settings(), data=str(args.data), masks=args.masks, split=args.split, limit=args.limit)
     atomic_write_text(out.with_name(out.stem + ".config.yml"), yaml.safe_dump(settings, sort_keys=True))
     failed = sum(1 for r in rows if r.score == 0)
     times = {(r.scene_id, r.im_id): r.time for r in rows}
     fps = len(times) / sum(times.values()) if times and sum(times.values()) > 0 else float("nan")
-    print(f"{len(rows)} estimate(s) on {len(times)} image(s) ({failed} without an estimate), {fps:.2f} FPS; wrote {out}")
+    print(
+        f"{len(rows)} estimate(s) on {len(times)} image(s) ({failed} without an estimate), {fps:.2f} FPS; wrote {out}"
+    )
     return 0
 
 
@@ -111,12 +122,18 @@ def _cmd_ablation(args) -> int:
         try:
             picked = [names[int(k)] for k in args.variants.split(",")]
         except (ValueError, IndexError):
-            raise ConfigError(f"--variants: comma-separated indices 0-{len(names) - 1}, got {args.variants!r}") from None
+            raise ConfigError(
+                f"--variants: comma-separated indices 0-{len(names) - 1}, got {args.variants!r}"
+            ) from None
     else:
         picked = names
     if (args.epochs is None) == (args.time_budget is None):
-        raise ConfigError("give the budget of every variant: --epochs N (equal steps) or --time-budget SECONDS (equal time)")
-    budget = {"epochs": args.epochs, "time_budget": 0.0} if args.epochs is not None else {"time_budget": args.time_budget}
+        raise ConfigError(
+            "give the budget of every variant: --epochs N (equal steps) or --time-budget SECONDS (equal time)"
+        )
+    budget = (
+        {"epochs": args.epochs, "time_budget": 0.0} if args.epochs is not None else {"time_budget": args.time_budget}
+    )
     overrides = parse_overrides(args.overrides)
     from .config import profile_config
 
@@ -204,12 +221,16 @@ def register(subparsers) -> None:
 
     from .ablation import VARIANTS
 
-    p = subparsers.add_parser("pose-ablation", help="train each option of the paper's architecture alone and score it on val",
-                              description="The ablation of section IV-C's choices: each variant (indices: " + "; ".join(
-                                  f"{k} {n}" for k, n in enumerate(VARIANTS)) + ") trained on --data with the same "
-                              "budget and scored by ADD(-S) on --val (never test). Resumable: finished variants are "
-                              "scored, not retrained. Writes OUT/<k>_<variant>/ runs, OUT/ablation.csv/.tex and the "
-                              "result artifact RESULTS_DIR/NAME.json.")
+    p = subparsers.add_parser(
+        "pose-ablation",
+        help="train each option of the paper's architecture alone and score it on val",
+        description="The ablation of section IV-C's choices: each variant (indices: "
+        + "; ".join(f"{k} {n}" for k, n in enumerate(VARIANTS))
+        + ") trained on --data with the same "
+        "budget and scored by ADD(-S) on --val (never test). Resumable: finished variants are "
+        "scored, not retrained. Writes OUT/<k>_<variant>/ runs, OUT/ablation.csv/.tex and the "
+        "result artifact RESULTS_DIR/NAME.json.",
+    )
     O.add(p, "--data", help="training dataset, e.g. data/train")
     O.add(p, "--val", required=True, help="held-out dataset the variants are scored on, e.g. data/val (never test)")
     O.add(p, "--out", help="directory of the variants' runs")

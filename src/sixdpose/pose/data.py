@@ -154,9 +154,10 @@ def collate_frames(frames: list[Frame], class_index: dict[int, int], noise: floa
     """Batch the instances of several frames for one forward pass.
 
     Crop mode: one image per instance. Full-image mode: one image per frame (its instances share the
-    CNN pass). ``noise``, ``jitter``: training augmentation (:func:`normalise_images`). Returns a dict of CPU tensors: ``images`` (B, 3, H, W), ``img_index`` (N,),
-    ``choose`` (N, P), ``cloud`` (N, P, 3), ``obj_index`` (N,), and ``R`` (N, 3, 3) / ``t`` (N, 3)
-    float32 when every instance has ground truth; ``instances``: the :class:`InstanceInput` list.
+    CNN pass). ``noise``, ``jitter``: training augmentation (:func:`normalise_images`). Returns a dict
+    of CPU tensors: ``images`` (B, 3, H, W), ``img_index`` (N,), ``choose`` (N, P), ``cloud`` (N, P, 3),
+    ``obj_index`` (N,), and ``R`` (N, 3, 3) / ``t`` (N, 3) float32 when every instance has ground truth;
+    ``instances``: the :class:`InstanceInput` list.
     """
     insts = [i for f in frames for i in f.instances]
     if not insts:

@@ -23,7 +23,10 @@ def plot_training(run_dir: str | Path, out: str | Path | None = None, title: str
     steps = [r for r in rows if r.get("loss") is not None]
     ax.plot([r["step"] for r in steps], [r["loss"] for r in steps], color="k", lw=0.8, label="loss (m)")
     epochs = sorted({r["epoch"] for r in steps})
-    means = [(max(r["step"] for r in steps if r["epoch"] == e), np.mean([r["loss"] for r in steps if r["epoch"] == e])) for e in epochs]
+    means = [
+        (max(r["step"] for r in steps if r["epoch"] == e), np.mean([r["loss"] for r in steps if r["epoch"] == e]))
+        for e in epochs
+    ]
     ax.plot([m[0] for m in means], [m[1] for m in means], "o-", color="tab:red", ms=3, lw=1, label="epoch mean")
     ax.set_yscale("log")
     ax.set_xlabel("step")
@@ -31,7 +34,9 @@ def plot_training(run_dir: str | Path, out: str | Path | None = None, title: str
     val = [r for r in rows if r.get("val_add") is not None]
     if val:
         ax2 = ax.twinx()
-        ax2.plot([r["step"] for r in val], [r["val_add"] for r in val], "s--", color="tab:blue", ms=3, label="val ADD(-S) %")
+        ax2.plot(
+            [r["step"] for r in val], [r["val_add"] for r in val], "s--", color="tab:blue", ms=3, label="val ADD(-S) %"
+        )
         ax2.set_ylabel("validation ADD(-S) (%)")
         ax2.legend(fontsize=7, loc="upper right")
     ax.legend(fontsize=7, loc="upper left")

@@ -30,7 +30,11 @@ def register(sub) -> None:
     p.add_argument("--stride", type=O.Int(1, 1_000_000), default=1,
                    help="only every N-th image (a fixed subset spread over the scenes)")
     O.add(p, "--min-px")
-    O.add(p, "--score-thresh", help="with predicted masks, skip detections whose score is below this (default %(default)s)")
+    O.add(
+        p,
+        "--score-thresh",
+        help="with predicted masks, skip detections whose score is below this (default %(default)s)",
+    )
     O.add(p, "--no-progress")
     p.set_defaults(func=_run)
 
@@ -64,7 +68,11 @@ def _run(args) -> int:
     msg = f"wrote {len(rows)} estimates ({n_bad} with score 0) to {out}"
     if failures:
         fpath = out.with_name(out.stem + "_skipped_images.csv")
-        write_table([dict(zip(("scene_id", "im_id", "reason"), f)) for f in failures], ["scene_id", "im_id", "reason"], fpath)
+        write_table(
+            [dict(zip(("scene_id", "im_id", "reason"), f, strict=True)) for f in failures],
+            ["scene_id", "im_id", "reason"],
+            fpath,
+        )
         msg += f"; {len(failures)} unreadable image(s) skipped, listed in {fpath}"
     print(msg)
     return 0

@@ -126,7 +126,10 @@ def register_ransac(scene: SceneCloud, ref: Reference, cfg: RegistrationConfig) 
         dist,
         reg.TransformationEstimationPointToPoint(False),
         cfg.ransac_n,
-        [reg.CorrespondenceCheckerBasedOnEdgeLength(cfg.ransac_edge_length), reg.CorrespondenceCheckerBasedOnDistance(dist)],
+        [
+            reg.CorrespondenceCheckerBasedOnEdgeLength(cfg.ransac_edge_length),
+            reg.CorrespondenceCheckerBasedOnDistance(dist),
+        ],
         reg.RANSACConvergenceCriteria(cfg.ransac_max_iteration, cfg.ransac_confidence),
     )
     X_CO = _invert(np.asarray(res.transformation))  # Open3D returns X_OC (scene -> model)
@@ -165,7 +168,8 @@ def register_super4pcs(scene: SceneCloud, ref: Reference, cfg: RegistrationConfi
     res = super4pcs(scene.points, scene.normals, ref.points, ref.normals, cfg, delta=delta,
                     Q_verify=None if ver is None else ver[0], Qn_verify=None if ver is None else ver[1])
     info = {"n_bases": res.n_bases, "n_congruent": res.n_congruent, "n_verified": res.n_verified}
-    return Registration(_invert(res.T), float(res.lcp), time.perf_counter() - t0, info)  # res.T maps scene onto model: X_OC
+    # res.T maps scene onto model: X_OC
+    return Registration(_invert(res.T), float(res.lcp), time.perf_counter() - t0, info)
 
 
 def refine_icp(scene: SceneCloud, ref: Reference, X_CO: np.ndarray, cfg: RegistrationConfig) -> Registration:

@@ -100,7 +100,16 @@ def _init_worker(ds: DatasetReader, method: str, icp: bool, cfg: RegistrationCon
                  min_score: float) -> None:
     from .geometry import ReferenceCache
 
-    _W.update(ds=ds, cache=ReferenceCache(ds), method=method, icp=icp, cfg=cfg, masks=masks, min_px=min_px, min_score=min_score)
+    _W.update(
+        ds=ds,
+        cache=ReferenceCache(ds),
+        method=method,
+        icp=icp,
+        cfg=cfg,
+        masks=masks,
+        min_px=min_px,
+        min_score=min_score,
+    )
     if _W["cfg"].colour_verify:
         from .verify import warmup
 
@@ -114,9 +123,9 @@ def process_image(index: int) -> tuple[list[PoseEstimate], tuple | None]:
         ``(rows, failure)``: the image's rows, and ``None`` or ``(scene_id, im_id, reason)`` when the
         image itself could not be used (unreadable image files or predictions); the run goes on.
     """
+    from ..artifacts.predictions import PredictionError
     from .geometry import backproject
     from .methods import estimate_pose
-    from ..artifacts.predictions import PredictionError
 
     ds, cache, cfg = _W["ds"], _W["cache"], _W["cfg"]
     method, icp, masks, min_px = _W["method"], _W["icp"], _W["masks"], _W["min_px"]
@@ -199,7 +208,11 @@ def process_image(index: int) -> tuple[list[PoseEstimate], tuple | None]:
         assert est is not None
         bp_time = time.perf_counter() - t0 - est.time  # backprojection etc. (est.time measured inside)
         score = est.score * det_score if pred else est.score
-        rows.append(PoseEstimate(sample.scene_id, sample.im_id, oid, float(score), est.X_CO[:3, :3].copy(), est.X_CO[:3, 3].copy()))
+        rows.append(
+            PoseEstimate(
+                sample.scene_id, sample.im_id, oid, float(score), est.X_CO[:3, :3].copy(), est.X_CO[:3, 3].copy()
+            )
+        )
         inst_time.append(est.time + max(bp_time, 0.0))
     total = sum(inst_time)
     for r in rows:
@@ -221,16 +234,20 @@ def check_inputs(ds: DatasetReader, masks: str) -> None:
 
     Raises:
         RegistrationError: no images, no depth, no GT masks (with ``masks="gt"``), or a missing
-            prediction directory. PredictionError: predicted masks made on another dataset. DatasetError: the depth looks wrongly scaled
-            (:func:`~sixdpose.datasets.base.check_depth_scale`).
+            prediction directory. PredictionError: predicted masks made on another dataset. DatasetError: the
+            depth looks wrongly scaled (:func:`~sixdpose.datasets.base.check_depth_scale`).
     """
     if len(ds) == 0:
         raise RegistrationError(f"{ds.location}: the dataset split has no images")
     if not ds.has_depth:
-        raise RegistrationError(f"{ds.location}: this split has no depth images (depth/ missing); the hybrid methods need depth")
+        raise RegistrationError(
+            f"{ds.location}: this split has no depth images (depth/ missing); the hybrid methods need depth"
+        )
     if masks == "gt":
         if not ds.has_masks:
-            raise RegistrationError(f"{ds.location}: this split has no ground-truth masks (mask_visib/); pass --masks PRED_DIR")
+            raise RegistrationError(
+                f"{ds.location}: this split has no ground-truth masks (mask_visib/); pass --masks PRED_DIR"
+            )
     elif not Path(masks).is_dir():
         raise RegistrationError(f"{masks}: predicted-mask directory not found")
     else:

@@ -246,7 +246,7 @@ def super4pcs(
     Pn: np.ndarray | None,
     Q: np.ndarray,
     Qn: np.ndarray | None,
-    cfg: "RegistrationConfig | None" = None,
+    cfg: RegistrationConfig | None = None,
     *,
     delta: float | None = None,
     Q_verify: np.ndarray | None = None,
@@ -291,7 +291,11 @@ def super4pcs(
         cfg = PRESETS["default"]
     overlap, n_samples, n_bases = cfg.s4pcs_overlap, cfg.s4pcs_samples, cfg.s4pcs_bases
     normal_tol_deg, stop_lcp = cfg.s4pcs_normal_tol_deg, cfg.s4pcs_stop_lcp
-    max_candidates, max_pairs, pair_tol_factor = cfg.s4pcs_max_candidates, cfg.s4pcs_max_pairs, cfg.s4pcs_pair_tol_factor
+    max_candidates, max_pairs, pair_tol_factor = (
+        cfg.s4pcs_max_candidates,
+        cfg.s4pcs_max_pairs,
+        cfg.s4pcs_pair_tol_factor,
+    )
     max_q, join_budget, seed = cfg.s4pcs_max_q, cfg.s4pcs_join_budget, cfg.seed
     delta = cfg.s4pcs_delta if delta is None else float(delta)
     t0 = time.perf_counter()
@@ -398,7 +402,9 @@ def super4pcs(
         k1, k2 = sm["i"], sm["j"]
         # rigid congruence: the two diagonals must make the base's angle
         ang_tol = 2.0 * tol / min(d1, d2) + 0.05
-        dphi = np.abs(np.arccos(np.clip(np.einsum("ij,ij->i", w1[k1], w2[k2]), -1, 1)) - math.acos(np.clip(cosphi, -1, 1)))
+        dphi = np.abs(
+            np.arccos(np.clip(np.einsum("ij,ij->i", w1[k1], w2[k2]), -1, 1)) - math.acos(np.clip(cosphi, -1, 1))
+        )
         keep = dphi < ang_tol
         k1, k2 = k1[keep], k2[keep]
         if len(k1) == 0:

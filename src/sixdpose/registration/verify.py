@@ -81,7 +81,9 @@ class ColourGrid:
         return self._w[key]
 
 
-def build_grid(points: np.ndarray, colors: np.ndarray, diameter: float, cells: int = 64, smooth_rel: float = 0.1) -> ColourGrid:
+def build_grid(
+    points: np.ndarray, colors: np.ndarray, diameter: float, cells: int = 64, smooth_rel: float = 0.1
+) -> ColourGrid:
     """Build the :class:`ColourGrid` of a coloured model (object frame, metres).
 
     Args:
@@ -124,8 +126,13 @@ def build_grid(points: np.ndarray, colors: np.ndarray, diameter: float, cells: i
     # each grid cell's nearest model point
     sig = 0.5 * smooth_rel * diameter / cell  # about the spread of a ball of radius smooth_rel * d
     cnt = gaussian_filter(np.bincount(flat, minlength=n).reshape(shape).astype(np.float64), sig, mode="constant")
-    sm = np.stack([gaussian_filter(np.bincount(flat, weights=ch[:, k], minlength=n).reshape(shape), sig, mode="constant")
-                   for k in range(3)], axis=-1).reshape(n, 3) / np.maximum(cnt.reshape(n, 1), 1e-12)
+    sm = np.stack(
+        [
+            gaussian_filter(np.bincount(flat, weights=ch[:, k], minlength=n).reshape(shape), sig, mode="constant")
+            for k in range(3)
+        ],
+        axis=-1,
+    ).reshape(n, 3) / np.maximum(cnt.reshape(n, 1), 1e-12)
     return ColourGrid(lo, cell, shape, d.astype(np.float32), ch[nn].astype(np.float32), sm[flat[nn]].astype(np.float32),
                       centroid, half - cell, time.perf_counter() - t0)
 
@@ -157,7 +164,7 @@ def _small_rotations(n: int, angle_deg: float, rng: np.random.Generator) -> np.n
 
 
 @numba.njit(cache=True, fastmath=True, nogil=True)
-def _score_kernel(v, S, c, origin, inv_cell, ny, nz, weights, feat, fs, out_geo, out_col):  # pragma: no cover - compiled
+def _score_kernel(v, S, c, origin, inv_cell, ny, nz, weights, feat, fs, out_geo, out_col):  # pragma: no cover - njit
     """For each rotation ``S[m]``: rotate the points ``v`` (K, 3; object frame about the centroid
     ``c``) as ``v @ S[m] + c``, look up their grid cells, and accumulate the mean surface weight
     (``out_geo[m]``) and the correlation of the centred scene features ``fs`` (K, 3) with the
@@ -185,8 +192,8 @@ def _score_kernel(v, S, c, origin, inv_cell, ny, nz, weights, feat, fs, out_geo,
             z = v[k, 0] * S[m, 0, 2] + v[k, 1] * S[m, 1, 2] + v[k, 2] * S[m, 2, 2] + c[2]
             i = int((x - origin[0]) * inv_cell)
             j = int((y - origin[1]) * inv_cell)
-            l = int((z - origin[2]) * inv_cell)
-            idx = (i * ny + j) * nz + l
+            kz = int((z - origin[2]) * inv_cell)
+            idx = (i * ny + j) * nz + kz
             sw += weights[idx]
             f0 = feat[idx, 0]
             f1 = feat[idx, 1]
@@ -213,7 +220,8 @@ def warmup() -> None:
 
 
 def _corr(fs: np.ndarray, fm: np.ndarray) -> np.ndarray:
-    """NumPy reference of the kernel's colour term (tests): correlation of the centred scene features (K, 3) with model features (M, K, 3) -> (M,)."""
+    """NumPy reference of the kernel's colour term (tests): correlation of the centred scene features
+    (K, 3) with model features (M, K, 3) -> (M,)."""
     fm = fm - fm.mean(axis=1, keepdims=True)
     num = np.einsum("kc,mkc->m", fs, fm)
     den = np.sqrt((fs * fs).sum() * np.einsum("mkc,mkc->m", fm, fm)) + 1e-12
@@ -236,7 +244,7 @@ def colour_search(
     colors: np.ndarray,
     grid: ColourGrid,
     diameter: float,
-    cfg: "RegistrationConfig | None" = None,
+    cfg: RegistrationConfig | None = None,
 ) -> SearchResult:
     """Search the rotations of the model about its centroid for the best colour agreement.
 

@@ -8,8 +8,8 @@ A *method* is a name and a function ``run(reader, masks, indices) -> list[PoseEs
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from ..artifacts.poses import PoseEstimate
 from ..constants import ADD_THRESHOLD, MIN_DETECTION_SCORE, MIN_VISIBLE_PX
@@ -29,7 +29,9 @@ class Run:
     result: EvalResult
 
 
-def hybrid_methods(cfg=None, workers: int = 2, methods=tuple(HYBRID_ALGORITHMS), icp=(False, True)) -> dict[str, Callable]:
+def hybrid_methods(
+    cfg=None, workers: int = 2, methods=tuple(HYBRID_ALGORITHMS), icp=(False, True)
+) -> dict[str, Callable]:
     """The hybrid methods as ``{display name: run(reader, masks, indices)}``.
 
     Args:
@@ -66,8 +68,15 @@ def learned_method(pose, refiner=None, iterations: int = 0, icp: bool = False, c
     return run
 
 
-def compare_methods(data: DatasetReader | str, methods: dict[str, Callable], mask_sources: dict[str, tuple[str, list[int]]],
-                    min_px: int = MIN_VISIBLE_PX, threshold: float = ADD_THRESHOLD, bop: bool = False, also=()):
+def compare_methods(
+    data: DatasetReader | str,
+    methods: dict[str, Callable],
+    mask_sources: dict[str, tuple[str, list[int]]],
+    min_px: int = MIN_VISIBLE_PX,
+    threshold: float = ADD_THRESHOLD,
+    bop: bool = False,
+    also=(),
+):
     """Run every method on every mask source and evaluate each run on the same images.
 
     Args:

@@ -85,7 +85,7 @@ def sources(results: list[Result], names: list[str] | None = None) -> str:
     when they share them). ``names``: how each result was asked for (``cpu/test_gt_learned_it0``; default
     its name), shown as ``results/<name>.json``."""
     groups: dict[str, list[str]] = {}
-    for r, name in zip(results, names or [r.name for r in results]):
+    for r, name in zip(results, names or [r.name for r in results], strict=True):
         p = r.provenance
         commit = (p.get("commit") or "unknown commit")[:7] + (" + local changes" if p.get("dirty") else "")
         key = f"commit `{commit}`, {str(p.get('date', '?'))[:10]}, {machine_text(p)}"
@@ -125,7 +125,8 @@ class Source:
 # --------------------------------------------------------------------------------------------
 _T3 = TABLES["III"]
 
-#: Learned-pose evaluations of the ``cpu`` runs on ``data/test``: (label, masks, result, method key of :data:`sixdpose.registry.METHODS` for the paper column).
+#: Learned-pose evaluations of the ``cpu`` runs on ``data/test``: (label, masks, result, method key of
+#: :data:`sixdpose.registry.METHODS` for the paper column).
 LEARNED_CPU = [
     ("learned, 0 refinement it.", "GT", "cpu/test_gt_learned_it0", "learned_it0"),
     ("learned + 2 refinement it.", "GT", "cpu/test_gt_learned_it2", "learned_it2"),
@@ -150,8 +151,12 @@ def _learned_cpu_summary(src: Source) -> str:
 
 
 def _learned_cpu_per_object(src: Source) -> str:
-    cols = [("learned (0 it.)", "cpu/test_gt_learned_it0"), ("+ 2 refinement it.", "cpu/test_gt_learned_it2"),
-            ("+ 2 it. + ICP", "cpu/test_gt_learned_it2_icp"), ("+ 2 it. + colour verif.", "cpu/test_gt_learned_it2_colour")]
+    cols = [
+        ("learned (0 it.)", "cpu/test_gt_learned_it0"),
+        ("+ 2 refinement it.", "cpu/test_gt_learned_it2"),
+        ("+ 2 it. + ICP", "cpu/test_gt_learned_it2_icp"),
+        ("+ 2 it. + colour verif.", "cpu/test_gt_learned_it2_colour"),
+    ]
     res = [src(n) for _, n in cols]
     rows = []
     for r0 in res[0].rows:
@@ -161,7 +166,8 @@ def _learned_cpu_per_object(src: Source) -> str:
     return md_table(["obj_id", "object", "GT instances", *[c for c, _ in cols]], rows)
 
 
-#: Hybrid methods on ``data/test`` with ideal and ``kinect`` depth: (label, method key for the paper column, ideal, kinect).
+#: Hybrid methods on ``data/test`` with ideal and ``kinect`` depth: (label, method key for the paper column,
+#: ideal, kinect).
 DEPTH_NOISE = [
     ("RANSAC + ICP", "ransac_icp", "cpu/test_gt_ransac_icp", "cpu/test_kinect_gt_ransac_icp"),
     ("Super4PCS + ICP", "super4pcs_icp", "cpu/test_gt_super4pcs_icp", "cpu/test_kinect_gt_super4pcs_icp"),
@@ -226,8 +232,16 @@ def _ycbv_synthetic_to_real(src: Source) -> str:
     for label, data, name in _ycbv_real():
         f = src(name).figures
         b = f.get("bop") or {}
-        rows.append([label, data, f"{fmt(f['accuracy'])} ({f['n_correct']}/{f['n_gt']})", b.get("ar"), b.get("adds_auc"),
-                     f["fps"]])
+        rows.append(
+            [
+                label,
+                data,
+                f"{fmt(f['accuracy'])} ({f['n_correct']}/{f['n_gt']})",
+                b.get("ar"),
+                b.get("adds_auc"),
+                f["fps"],
+            ]
+        )
     return md_table(["method", "trained only on", "ADD(-S) % (correct/GT)", "AR", "ADD-S AUC", "FPS (CPU)"], rows) + \
         "\n\nFPS: frames / the sum of their per-frame times in the results CSV (2-core CPU, disk reads excluded; " \
         "`register --workers 2` for the hybrid rows)."
@@ -308,7 +322,9 @@ def blocks(text: str, where: str = "README") -> list[tuple[str, int, int]]:
             raise ReadmeError(f"{where}:{line}: block `results:{name}` has no closing `{close}`")
         inner = _OPEN.search(text, m.end(), end)
         if inner is not None:
-            raise ReadmeError(f"{where}:{line}: block `results:{name}` contains another block (`results:{inner.group(1)}`)")
+            raise ReadmeError(
+                f"{where}:{line}: block `results:{name}` contains another block (`results:{inner.group(1)}`)"
+            )
         start = text.find("\n", m.end()) + 1 if text.find("\n", m.end()) >= 0 else m.end()
         out.append((name, start, end))
         pos = end + len(close)

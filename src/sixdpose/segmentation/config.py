@@ -7,9 +7,10 @@ Three profiles are defined:
     weights (when they are in the local torch hub cache), no frozen layers, Adam at 1e-3 decayed by
     10x every 30 epochs, 100 epochs, a seeded random 90/10 image split for the synthetic dataset
     (BOP data: the ``train``/``test`` split directories as given). Images at their native 640x480
-    resolution (torchvision's ``min_size``/``max_size`` set so a 640x480 image is not rescaled at test time). Augmentation
-    (not specified by the paper, chosen here): photometric colour jitter and multi-scale training
-    (the shorter side is drawn from ``train_min_sizes`` each step, i.e. scales 0.8x..1.2x).
+    resolution (torchvision's ``min_size``/``max_size`` set so a 640x480 image is not rescaled at test
+    time). Augmentation (not specified by the paper, chosen here): photometric colour jitter and
+    multi-scale training (the shorter side is drawn from ``train_min_sizes`` each step, i.e. scales
+    0.8x..1.2x).
 
 ``smoke``
     The same code path, sized for a CPU continuous-integration run of a few minutes: images resized

@@ -56,7 +56,7 @@ class ClassMap:
     names: list[str]
 
     @classmethod
-    def from_dataset(cls, ds) -> "ClassMap":
+    def from_dataset(cls, ds) -> ClassMap:
         """All objects of ``ds.object_ids`` (the dataset's target objects), sorted by id."""
         ids = ds.object_ids
         if not ids:
@@ -65,13 +65,13 @@ class ClassMap:
         return cls(keys, [str(ids[k]) for k in keys])
 
     @classmethod
-    def from_list(cls, pairs) -> "ClassMap":
+    def from_list(cls, pairs) -> ClassMap:
         """From ``[[obj_id, name], ...]`` as written by :meth:`to_list`."""
         return cls([int(p[0]) for p in pairs], [str(p[1]) for p in pairs])
 
     def to_list(self) -> list[list]:
         """``[[obj_id, name], ...]`` (JSON-compatible)."""
-        return [[i, n] for i, n in zip(self.obj_ids, self.names)]
+        return [[i, n] for i, n in zip(self.obj_ids, self.names, strict=True)]
 
     def __len__(self) -> int:
         return len(self.obj_ids)
@@ -94,7 +94,9 @@ class ClassMap:
         shared with a different name means the checkpoint was trained on another dataset.
         """
         theirs = {int(k): str(v) for k, v in ds.object_ids.items()}
-        clashes = [(i, n, theirs[i]) for i, n in zip(self.obj_ids, self.names) if i in theirs and theirs[i] != n]
+        clashes = [
+            (i, n, theirs[i]) for i, n in zip(self.obj_ids, self.names, strict=True) if i in theirs and theirs[i] != n
+        ]
         if clashes:
             i, a, b = clashes[0]
             raise DatasetError(
@@ -126,33 +128,27 @@ def make_split(data: str | Path, cfg: SegConfig) -> dict:
     """
     ds = open_dataset(data, split=cfg.train_split)
     if is_synthetic(ds):
-        keys = [tuple(map(int, k)) for k in ds.keys()]
+        keys = [tuple(map(int, k)) for k in ds.keys()]  # noqa: SIM118 (a dataset reader's keys(), not a dict)
         if not keys:
             raise DatasetError(f"{data}: the dataset has no images")
         rng = np.random.default_rng(cfg.seed)
-        if cfg.split_by == "scene":
-            groups = sorted({k[0] for k in keys})
-        else:
-            groups = list(range(len(keys)))
+        groups = sorted({k[0] for k in keys}) if cfg.split_by == "scene" else list(range(len(keys)))
         n_test = int(round(cfg.val_fraction * len(groups)))
-        if cfg.val_fraction > 0 and len(groups) >= 2:
-            n_test = min(max(n_test, 1), len(groups) - 1)
-        else:
-            n_test = 0
+        n_test = min(max(n_test, 1), len(groups) - 1) if cfg.val_fraction > 0 and len(groups) >= 2 else 0
         perm = rng.permutation(len(groups))
         test_groups = {groups[i] for i in perm[:n_test]}
         if cfg.split_by == "scene":
             is_test = [k[0] in test_groups for k in keys]
         else:
             is_test = [i in test_groups for i in range(len(keys))]
-        train = [list(k) for k, t in zip(keys, is_test) if not t]
-        test = [list(k) for k, t in zip(keys, is_test) if t]
+        train = [list(k) for k, t in zip(keys, is_test, strict=True) if not t]
+        test = [list(k) for k, t in zip(keys, is_test, strict=True) if t]
         policy = f"random {cfg.split_by} split, val_fraction={cfg.val_fraction}, seed={cfg.seed}"
         return {"policy": policy, "train": {"split": None, "keys": train}, "test": {"split": None, "keys": test}}
-    train = [list(map(int, k)) for k in ds.keys()]
+    train = [list(map(int, k)) for k in ds.keys()]  # noqa: SIM118 (a dataset reader's keys(), not a dict)
     try:
         test_ds = open_dataset(data, split=cfg.test_split)
-        test = [list(map(int, k)) for k in test_ds.keys()]
+        test = [list(map(int, k)) for k in test_ds.keys()]  # noqa: SIM118 (a dataset reader's keys(), not a dict)
     except DatasetError as e:
         log.warning("no test split %r (%s); the run has no held-out images", cfg.test_split, e)
         test = []
@@ -209,7 +205,7 @@ class ScanResult:
         }
 
     @classmethod
-    def from_dict(cls, d: dict) -> "ScanResult":
+    def from_dict(cls, d: dict) -> ScanResult:
         """Inverse of :meth:`to_dict`."""
         return cls(
             list(d["usable"]),
@@ -292,9 +288,11 @@ def scan(ds, indices: list[int], classes: ClassMap, cfg: SegConfig, num_workers:
     for s, i, o, k, why in res.dropped_instances:
         log.info("dropping instance obj_id %d inst %d of scene %d image %d: %s", o, k, s, i, why)
     if res.dropped_instances:
-        log.warning("dropped %d training instance(s) (empty/small masks or non-class objects)", len(res.dropped_instances))
+        log.warning(
+            "dropped %d training instance(s) (empty/small masks or non-class objects)", len(res.dropped_instances)
+        )
     if res.missing_classes:
-        names = dict(zip(classes.obj_ids, classes.names))
+        names = dict(zip(classes.obj_ids, classes.names, strict=True))
         log.warning(
             "class(es) without any training instance in this split, they cannot be learned: %s",
             ", ".join(f"{i} ({names[i]})" for i in res.missing_classes),

@@ -27,8 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..artifacts.predictions import (check_predictions_dataset, read_coco_results, read_predictions,
-                                     read_predictions_meta)
+from ..artifacts.predictions import (
+    check_predictions_dataset,
+    read_coco_results,
+    read_predictions,
+    read_predictions_meta,
+)
 from ..artifacts.tables import tex_escape
 from ..datasets.base import DatasetError
 from ..datasets.readers import open_dataset
@@ -59,7 +63,9 @@ def coco_ground_truth(samples, classes: ClassMap) -> tuple[dict, dict]:
     for s in samples:
         H, W = s.rgb.shape[:2]
         iid = coco_image_id(s.scene_id, s.im_id)
-        images.append({"id": iid, "width": int(W), "height": int(H), "scene_id": int(s.scene_id), "im_id": int(s.im_id)})
+        images.append(
+            {"id": iid, "width": int(W), "height": int(H), "scene_id": int(s.scene_id), "im_id": int(s.im_id)}
+        )
         stats["images"] += 1
         for inst in s.instances:
             if classes.label_of(inst.obj_id) is None:
@@ -88,7 +94,7 @@ def coco_ground_truth(samples, classes: ClassMap) -> tuple[dict, dict]:
             stats["instances"] += 1
     if stats["empty_masks"]:
         log.info("left %d instance(s) with an empty mask out of the ground truth", stats["empty_masks"])
-    cats = [{"id": i, "name": n} for i, n in zip(classes.obj_ids, classes.names)]
+    cats = [{"id": i, "name": n} for i, n in zip(classes.obj_ids, classes.names, strict=True)]
     return {"images": images, "annotations": anns, "categories": cats}, stats
 
 
@@ -116,7 +122,13 @@ def coco_evaluate(gt: dict, results: list[dict], classes: ClassMap) -> dict:
     n_gt = {c: 0 for c in classes.obj_ids}
     for a in gt["annotations"]:
         n_gt[a["category_id"]] += 1
-    out = {"overall": {}, "per_class": [], "n_images": len(image_ids), "n_gt": sum(n_gt.values()), "n_det": len(results)}
+    out = {
+        "overall": {},
+        "per_class": [],
+        "n_images": len(image_ids),
+        "n_gt": sum(n_gt.values()),
+        "n_det": len(results),
+    }
     per = {c: {} for c in classes.obj_ids}
     for iou_type, tag in (("segm", "mask"), ("bbox", "box")):
         if not results or not gt["annotations"]:
@@ -142,7 +154,7 @@ def coco_evaluate(gt: dict, results: list[dict], classes: ClassMap) -> dict:
             per[c][f"{tag}_AP"] = _mean_valid(p_all)
             per[c][f"{tag}_AP50"] = _mean_valid(prec[np.argmin(np.abs(iou_thr - 0.5)), :, k, 0, -1])
             per[c][f"{tag}_AP75"] = _mean_valid(prec[np.argmin(np.abs(iou_thr - 0.75)), :, k, 0, -1])
-    names = dict(zip(classes.obj_ids, classes.names))
+    names = dict(zip(classes.obj_ids, classes.names, strict=True))
     for c in classes.obj_ids:
         out["per_class"].append({"obj_id": c, "name": names[c], "n_gt": n_gt[c], **per[c]})
     absent = [c for c in classes.obj_ids if n_gt[c] == 0]
@@ -224,7 +236,11 @@ def evaluate(data: str | Path, pred_dir: str | Path, out_dir: str | Path | None 
             for d in read_predictions(pred_dir, s, i):
                 m, lab, sc = d.mask, d.obj_id, d.score
                 ys, xs = np.flatnonzero(m.any(1)), np.flatnonzero(m.any(0))
-                bbox = [float(xs[0]), float(ys[0]), float(xs[-1] + 1 - xs[0]), float(ys[-1] + 1 - ys[0])] if xs.size else [0.0] * 4
+                bbox = (
+                    [float(xs[0]), float(ys[0]), float(xs[-1] + 1 - xs[0]), float(ys[-1] + 1 - ys[0])]
+                    if xs.size
+                    else [0.0] * 4
+                )
                 results.append({"image_id": coco_image_id(s, i), "category_id": int(lab),
                                 "segmentation": encode_rle(m), "bbox": bbox, "score": float(sc)})
     metrics = coco_evaluate(gt, results, classes)

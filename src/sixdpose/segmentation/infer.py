@@ -120,10 +120,14 @@ class Segmenter:
         with torch.autocast("cuda", dtype=torch.float16) if use_amp else nullcontext():
             outs = self.model(ims)
         res = []
-        for o, r in zip(outs, rgbs):
+        for o, r in zip(outs, rgbs, strict=True):
             scores = o["scores"].float().cpu().numpy().astype(np.float32)
             order = np.argsort(-scores, kind="stable")
-            masks = (o["masks"][:, 0] > mask_thresh).cpu().numpy()[order] if len(order) else np.zeros((0,) + r.shape[:2], bool)
+            masks = (
+                (o["masks"][:, 0] > mask_thresh).cpu().numpy()[order]
+                if len(order)
+                else np.zeros((0,) + r.shape[:2], bool)
+            )
             labels = self._lut[o["labels"].cpu().numpy()[order]].astype(np.int32)
             res.append({
                 "masks": masks.astype(bool, copy=False),
@@ -147,7 +151,7 @@ class _Images(torch.utils.data.Dataset):
 
 
 def _transpose(batch):
-    return list(zip(*batch))
+    return list(zip(*batch, strict=True))
 
 
 def segment(
@@ -221,11 +225,11 @@ def segment(
         t0 = time.perf_counter()
         preds = seg.predict(list(rgbs))
         t_model += time.perf_counter() - t0
-        for s, i, rgb, p in zip(scene_ids, im_ids, rgbs, preds):
+        for s, i, rgb, p in zip(scene_ids, im_ids, rgbs, preds, strict=True):
             write_predictions(out, s, i, p["masks"], p["labels"], p["scores"], p["boxes"])
             images.append([int(s), int(i), int(rgb.shape[0]), int(rgb.shape[1])])
             n_det += len(p["labels"])
-            for m, lab, sc, bx in zip(p["masks"], p["labels"], p["scores"], p["boxes"]):
+            for m, lab, sc, bx in zip(p["masks"], p["labels"], p["scores"], p["boxes"], strict=True):
                 results.append({
                     "image_id": coco_image_id(s, i),
                     "category_id": int(lab),

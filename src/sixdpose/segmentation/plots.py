@@ -50,7 +50,7 @@ def plot_loss(run_dir: str | Path, ax=None, out: str | Path | None = None):
 
 def _overlay(rgb: np.ndarray, masks, labels, colors: dict) -> np.ndarray:
     img = rgb.astype(np.float32) / 255.0
-    for m, lab in zip(masks, labels):
+    for m, lab in zip(masks, labels, strict=True):
         c = np.asarray(colors[int(lab)], np.float32)
         img[m] = 0.45 * img[m] + 0.55 * c
         # outline
@@ -75,8 +75,8 @@ def plot_predictions(data, pred_dir: str | Path, n: int = 3, score_thresh: float
     """
     import matplotlib.pyplot as plt
 
-    from .evaluate import open_segmented
     from ..artifacts.predictions import read_predictions
+    from .evaluate import open_segmented
 
     pred_dir = Path(pred_dir)
     ds, meta, index = open_segmented(data, pred_dir)
@@ -90,7 +90,7 @@ def plot_predictions(data, pred_dir: str | Path, n: int = 3, score_thresh: float
     cmap = plt.get_cmap("tab20")
     colors = {i: cmap(k % 20)[:3] for k, i in enumerate(ids)}
     fig, axes = plt.subplots(len(pick), 2, figsize=(9, 3.4 * len(pick)), squeeze=False)
-    for row, key in zip(axes, pick):
+    for row, key in zip(axes, pick, strict=True):
         s = ds[index[key]]
         gt_masks = [i.mask for i in s.instances if i.mask is not None and i.obj_id in colors]
         gt_labels = [i.obj_id for i in s.instances if i.mask is not None and i.obj_id in colors]
