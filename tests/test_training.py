@@ -311,3 +311,49 @@ def test_rank0_setup_error_reaches_every_rank(pose_ds, tmp_path):
                         "--profile", "smoke", "--no-progress"], env=env, capture_output=True, text=True, timeout=120)
     assert p.returncode != 0
     assert p.stderr.count("already holds a run") >= 2, p.stderr[-3000:]  # rank 0's own and rank 1's copy
+
+
+# ------------------------------------------------------------------------------------------------
+# a run directory whose files were damaged: one line, never a traceback
+# ------------------------------------------------------------------------------------------------
+def _damage(path: Path, how: str) -> None:
+    text = path.read_text()
+    if how == "truncate":
+        path.write_text(text[: len(text) // 2])
+    elif how == "swap-type":  # every value of the first level becomes a list
+        d = json.loads(text)
+        path.write_text(json.dumps({k: [v] for k, v in d.items()}))
+    elif how == "remove-key":
+        d = json.loads(text)
+        d.pop(next(iter(d)))
+        path.write_text(json.dumps(d))
+
+
+@pytest.mark.parametrize("name, how", [("config.json", "truncate"), ("config.json", "swap-type"),
+                                       ("status.json", "truncate"), ("status.json", "swap-type"),
+                                       ("status.json", "remove-key"), ("last.pt", "bytes"), ("metrics.csv", "bytes")])
+def test_a_damaged_run_directory_is_one_line(pose_ds, tmp_path, capsys, name, how):
+    """Resume and prediction on a run whose file ``name`` was damaged: exit 2 and one line naming the
+    file, or (status.json, metrics.csv: records the run can rebuild) a resume that goes on. (A key
+    missing from config.json takes its default: configs of older versions lack newer fields.)"""
+    from sixdpose.pose.train import train_pose
+
+    run = tmp_path / "run"
+    with pytest.raises(Interrupt):
+        train_pose(pose_ds, run, profile="smoke", progress=False, epochs=2, repeat=1, after_step=_interrupt_at(2))
+    target = run / name
+    if how == "bytes":
+        target.write_bytes(target.read_bytes()[: max(1, target.stat().st_size // 3)] + b"\0\0garbage")
+    else:
+        _damage(target, how)
+    capsys.readouterr()
+    rc = main(["train-pose", "--data", str(pose_ds), "--out", str(run), "--resume", "--no-progress"])
+    err = capsys.readouterr().err
+    assert "Traceback" not in err, err
+    if name in ("status.json", "metrics.csv"):  # records the run can rebuild: it resumes and finishes
+        assert rc == 0, err
+        assert _checkpoint(run / "model.pt")["epoch"] == 2
+        assert json.loads((run / "status.json").read_text())["finished"] is True
+    else:
+        lines = [ln for ln in err.strip().splitlines() if ln.startswith("sixdpose")]
+        assert rc == 2 and len(lines) == 1 and name in lines[0], err

@@ -98,13 +98,28 @@ def data_fingerprint(reader, extra=None) -> str:
     return h.hexdigest()
 
 
+_STATUS_TYPES = {"finished": bool, "epoch": int, "epochs": int, "data": str, "data_sha256": str}
+
+
 def read_status(run_dir: str | Path) -> dict | None:
-    """``RUN/status.json`` as a dict, or None (a run of an older version, or not started)."""
-    try:
-        st = json.loads((Path(run_dir) / STATUS).read_text())
-    except (OSError, ValueError):
+    """``RUN/status.json`` as a dict, or None: a run of an older version or not started (no file), or a
+    damaged file (then one warning line naming it: the status is rebuilt at the next checkpoint, and
+    the data check of a resume cannot be made)."""
+    path = Path(run_dir) / STATUS
+    if not path.is_file():
         return None
-    return st if isinstance(st, dict) else None
+    try:
+        st = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        log.warning("%s: unreadable (%s); ignored", path, str(e).splitlines()[0] if str(e) else type(e).__name__)
+        return None
+    bad = [k for k, t in _STATUS_TYPES.items()
+           if not isinstance(st, dict) or (k in st and not (isinstance(st[k], t) and (t is bool or not
+                                                                                       isinstance(st[k], bool))))]
+    if bad:
+        log.warning("%s: %s not of the expected type; ignored", path, ", ".join(bad))
+        return None
+    return st
 
 
 def write_status(run_dir: Path, *, finished: bool, epoch: int, epochs: int, data: str, data_sha256: str) -> None:
