@@ -28,11 +28,11 @@ RESULTS = None  # result artifacts; None: ../results/<PROFILE> (the graph's, git
 # %%
 import os
 
+from sixdpose.graph import training_data
+
 PROFILE = PROFILE or os.environ.get("SIXDPOSE_PROFILE", "smoke")
 SMALL = PROFILE in ("smoke", "demo")
-GEN_PROFILE = {"cpu": "train"}.get(PROFILE, PROFILE)  # generator profile of the training data
-DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{GEN_PROFILE}"
-TEST_DATA = TEST_DATA or (DATA if SMALL else "../data/test")
+DATA, TEST_DATA = training_data(PROFILE, DATA, TEST_DATA)
 RUN_DIR = RUN_DIR or f"../runs/{PROFILE}/pose"
 POSE_PROFILE = POSE_PROFILE or ("smoke" if SMALL else PROFILE)
 TEST_IMAGES = TEST_IMAGES or {"smoke": 4, "demo": 6}.get(PROFILE, 0)

@@ -24,11 +24,11 @@ FIGURES = "../figures"
 # %%
 import os
 
+from sixdpose.graph import training_data
+
 PROFILE = PROFILE or os.environ.get("SIXDPOSE_PROFILE", "smoke")
 SMALL = PROFILE in ("smoke", "demo")
-GEN_PROFILE = {"cpu": "train"}.get(PROFILE, PROFILE)  # generator profile of the training data
-DATA = DATA or os.environ.get("SIXDPOSE_DATA") or f"../data/{GEN_PROFILE}"
-TEST_DATA = TEST_DATA or (DATA if SMALL else "../data/test")
+DATA, TEST_DATA = training_data(PROFILE, DATA, TEST_DATA)
 POSE_RUN = POSE_RUN or f"../runs/{PROFILE}/pose"
 RUN_DIR = RUN_DIR or f"../runs/{PROFILE}/refiner"
 REFINER_PROFILE = REFINER_PROFILE or ("smoke" if SMALL else PROFILE)

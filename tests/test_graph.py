@@ -5,7 +5,15 @@ from __future__ import annotations
 import pytest
 
 from sixdpose.errors import SixdposeError
-from sixdpose.graph import MissingInputError, make_target, repo_root, require, require_dataset, require_run
+from sixdpose.graph import (
+    MissingInputError,
+    make_target,
+    repo_root,
+    require,
+    require_dataset,
+    require_run,
+    training_data,
+)
 
 
 def test_missing_inputs_name_their_make_target(tmp_path, monkeypatch):
@@ -26,3 +34,14 @@ def test_missing_inputs_name_their_make_target(tmp_path, monkeypatch):
     assert require("../data/test/manifest.json", "x").is_file()
     outside = tmp_path.parent / "elsewhere.json"
     assert make_target(outside) == str(outside)
+
+
+def test_training_data_defaults(monkeypatch):
+    monkeypatch.delenv("SIXDPOSE_DATA", raising=False)
+    assert training_data("smoke") == ("../data/smoke", "../data/smoke")
+    assert training_data("demo", test_data="t") == ("../data/demo", "t")
+    assert training_data("cpu") == ("../data/train", "../data/test")
+    assert training_data("paper", "d") == ("d", "../data/test")
+    monkeypatch.setenv("SIXDPOSE_DATA", "/x")
+    assert training_data("smoke") == ("/x", "/x")
+    assert training_data("cpu", "d") == ("d", "../data/test")

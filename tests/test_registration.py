@@ -26,6 +26,11 @@ def syn(tmp_path_factory):
     return write_synthetic_dataset(tmp_path_factory.mktemp("syn") / "d", n_images=3)
 
 
+def _register(data, method: str, *args: str) -> int:
+    """Exit status of ``sixdpose register --data DATA --method METHOD ARGS...``."""
+    return main(["register", "--data", str(data), "--method", method, *args])
+
+
 def test_backproject_matches_pinhole_loop():
     rng = np.random.default_rng(0)
     depth = rng.uniform(0.4, 1.0, (6, 8)).astype(np.float32)
@@ -146,24 +151,7 @@ def test_presets_behaviour(syn):
 
 def test_runner_writes_bop_rows_and_evaluates(syn, tmp_path):
     out = tmp_path / "r.csv"
-    assert (
-        main(
-            [
-                "register",
-                "--data",
-                str(syn),
-                "--method",
-                "super4pcs",
-                "--icp",
-                "--out",
-                str(out),
-                "--workers",
-                "1",
-                "--no-progress",
-            ]
-        )
-        == 0
-    )
+    assert _register(syn, "super4pcs", "--icp", "--out", str(out), "--workers", "1", "--no-progress") == 0
     with open(out) as fh:
         rows = list(csv.DictReader(fh))
     assert list(rows[0]) == ["scene_id", "im_id", "obj_id", "score", "R", "t", "time"]
@@ -248,8 +236,8 @@ def test_unreadable_images_and_models_are_skipped_and_recorded(syn, tmp_path, ca
              scores=np.array([0.9]))
     (pred / f"{s0.scene_id}_{s0.im_id}.npz").write_bytes(b"not an npz")
     out = tmp_path / "r.csv"
-    assert main(["register", "--data", str(syn), "--method", "ransac", "--masks", str(pred), "--limit", "2",
-                 "--workers", "1", "--no-progress", "--out", str(out)]) == 0
+    assert _register(syn, "ransac", "--masks", str(pred), "--limit", "2", "--workers", "1", "--no-progress",
+                     "--out", str(out)) == 0
     printed = capsys.readouterr().out
     assert "1 unreadable image(s) skipped" in printed
     skipped = (tmp_path / "r_skipped_images.csv").read_text()
@@ -276,29 +264,10 @@ def test_unreadable_images_and_models_are_skipped_and_recorded(syn, tmp_path, ca
 
 
 def test_register_cli_errors(syn, tmp_path, capsys):
-    assert (
-        main(["register", "--data", str(tmp_path / "none"), "--method", "fgr", "--out", str(tmp_path / "x.csv")]) == 2
-    )
-    assert (
-        main(
-            [
-                "register",
-                "--data",
-                str(syn),
-                "--method",
-                "fgr",
-                "--masks",
-                str(tmp_path / "nodir"),
-                "--out",
-                str(tmp_path / "x.csv"),
-            ]
-        )
-        == 2
-    )
-    assert (
-        main(["register", "--data", str(syn), "--method", "fgr", "--set", "nope=1", "--out", str(tmp_path / "x.csv")])
-        == 2
-    )
+    out = str(tmp_path / "x.csv")
+    assert _register(tmp_path / "none", "fgr", "--out", out) == 2
+    assert _register(syn, "fgr", "--masks", str(tmp_path / "nodir"), "--out", out) == 2
+    assert _register(syn, "fgr", "--set", "nope=1", "--out", out) == 2
     err = capsys.readouterr().err
     assert "predicted-mask directory not found" in err and "nope" in err
     assert not (tmp_path / "x.csv").exists()

@@ -79,6 +79,22 @@ def _assert_session_ends(sid: int, within: float = 5.0) -> None:
     assert not left, f"still running {within} s after: {left}"
 
 
+def _assert_workers_die_with_their_parent(cmd: list[str], cpu_s: float, timeout: float = 120.0) -> None:
+    """Start ``cmd`` (a command with 2 pool workers) in its own session, SIGKILL the parent alone once both
+    workers used ``cpu_s`` CPU seconds (within ``timeout`` s), and check that the whole session ends within
+    5 s and that nothing printed a traceback."""
+    proc = subprocess.Popen(cmd, env=_env(), start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        _wait_for_busy_workers(proc, 2, cpu_s=cpu_s, timeout=timeout)
+        os.kill(proc.pid, signal.SIGKILL)  # the parent alone
+        proc.wait()
+        _assert_session_ends(proc.pid, within=5.0)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert b"Traceback" not in proc.stderr.read()
+
+
 @pytest.fixture(scope="module")
 def syn(tmp_path_factory):
     return write_synthetic_dataset(tmp_path_factory.mktemp("syn") / "d", n_images=3)
@@ -139,16 +155,7 @@ def test_seed_option_and_instance_seeds(syn, tmp_path, capsys):
 def test_register_workers_die_with_their_parent(tmp_path):
     cmd = [sys.executable, "-m", "sixdpose.cli", "register", "--data", str(YCBV), "--split", "train_real",
            "--method", "super4pcs", "--icp", "--workers", "2", "--no-progress", "--out", str(tmp_path / "r.csv")]
-    proc = subprocess.Popen(cmd, env=_env(), start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    try:
-        _wait_for_busy_workers(proc, 2, cpu_s=2.0)
-        os.kill(proc.pid, signal.SIGKILL)  # the parent alone
-        proc.wait()
-        _assert_session_ends(proc.pid, within=5.0)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-    assert b"Traceback" not in proc.stderr.read()
+    _assert_workers_die_with_their_parent(cmd, cpu_s=2.0)
 
 
 @needs_ycbv
@@ -184,16 +191,7 @@ def test_register_ctrl_c_is_one_line(tmp_path, worker_cpu_s):
 def test_generate_workers_die_with_their_parent(tmp_path, ycb_dir):
     cmd = [sys.executable, "-m", "sixdpose.cli", "generate", "--profile", "smoke", "--scenes", "8", "--out",
            str(tmp_path / "g"), "--assets", str(ycb_dir), "--workers", "2", "--no-progress"]
-    proc = subprocess.Popen(cmd, env=_env(), start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    try:
-        _wait_for_busy_workers(proc, 2, cpu_s=1.5, timeout=300)
-        os.kill(proc.pid, signal.SIGKILL)
-        proc.wait()
-        _assert_session_ends(proc.pid, within=5.0)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-    assert b"Traceback" not in proc.stderr.read()
+    _assert_workers_die_with_their_parent(cmd, cpu_s=1.5, timeout=300)
 
 
 # ------------------------------------------------------------------------------------------------

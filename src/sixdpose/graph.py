@@ -71,3 +71,21 @@ def require_run(run_dir: str | os.PathLike, profile: str | None = None, what: st
     last by train-seg / train-pose / train-refiner); see :func:`require`."""
     require(Path(run_dir) / "model.pt", what, profile)
     return Path(run_dir)
+
+
+def training_data(profile: str, data: str | None = None, test_data: str | None = None) -> tuple[str, str]:
+    """The training and held-out dataset directories of a training notebook (05, 06), relative to
+    ``notebooks/``, where the notebook's parameters leave them None.
+
+    Args:
+        profile: the graph profile (smoke, demo, cpu, paper).
+        data: the training data; None: ``$SIXDPOSE_DATA``, else ``../data/<generator profile>`` (the
+            cpu profile trains on ``../data/train``).
+        test_data: the held-out data; None: the training data for smoke and demo (a pipeline check),
+            else ``../data/test``.
+    Returns:
+        ``(data, test_data)``.
+    """
+    gen_profile = {"cpu": "train"}.get(profile, profile)
+    data = data or os.environ.get("SIXDPOSE_DATA") or f"../data/{gen_profile}"
+    return data, test_data or (data if profile in ("smoke", "demo") else "../data/test")

@@ -83,30 +83,31 @@ class RealMethod:
         return "learned" if self.trained_on else "hybrid"
 
 
-_KINECT, _IDEAL = "ycbv (kinect depth)", "ycbv_ideal (ideal depth)"
-#: The rows of the real-frames table, in table order.
+#: The learned rows of the real-frames table, each trained once on kinect and once on ideal depth:
+#: (key suffix, label, pose run-name suffix, further predict-pose arguments). ``{d}`` in the arguments
+#: stands for the run-name suffix of the depth (``""`` or ``"_ideal"``); ``{runs}`` is left for the graph.
+_LEARNED_REAL = (
+    ("", "learned", "", ""),
+    ("_e12", "learned, 12 epochs", "_e12", ""),
+    ("_it2", "learned + 2 refinement it.", "", " --refiner {runs}/refiner_ycbv{d} --iterations 2"),
+    ("_jitter", "learned, colour jitter 0.3", "_jitter", ""),
+    ("_icp", "learned + ICP", "", " --icp"),
+    ("_colour", "learned + colour verification", "", " --colour-verify"),
+)
+#: The rows of the real-frames table, in table order: each learned variant on kinect, then on ideal
+#: depth; then the hybrid methods with ICP.
 REAL_METHODS: tuple[RealMethod, ...] = (
-    RealMethod("learned", "learned", _KINECT, "predict-pose --pose {runs}/pose_ycbv"),
-    RealMethod("learned_ideal", "learned", _IDEAL, "predict-pose --pose {runs}/pose_ycbv_ideal"),
-    RealMethod("learned_e12", "learned, 12 epochs", _KINECT, "predict-pose --pose {runs}/pose_ycbv_e12"),
-    RealMethod("learned_ideal_e12", "learned, 12 epochs", _IDEAL, "predict-pose --pose {runs}/pose_ycbv_ideal_e12"),
-    RealMethod("learned_it2", "learned + 2 refinement it.", _KINECT,
-               "predict-pose --pose {runs}/pose_ycbv --refiner {runs}/refiner_ycbv --iterations 2"),
-    RealMethod("learned_ideal_it2", "learned + 2 refinement it.", _IDEAL,
-               "predict-pose --pose {runs}/pose_ycbv_ideal --refiner {runs}/refiner_ycbv_ideal --iterations 2"),
-    RealMethod("learned_jitter", "learned, colour jitter 0.3", _KINECT, "predict-pose --pose {runs}/pose_ycbv_jitter"),
-    RealMethod("learned_ideal_jitter", "learned, colour jitter 0.3", _IDEAL,
-               "predict-pose --pose {runs}/pose_ycbv_ideal_jitter"),
-    RealMethod("learned_icp", "learned + ICP", _KINECT, "predict-pose --pose {runs}/pose_ycbv --icp"),
-    RealMethod("learned_ideal_icp", "learned + ICP", _IDEAL, "predict-pose --pose {runs}/pose_ycbv_ideal --icp"),
-    RealMethod("learned_colour", "learned + colour verification", _KINECT,
-               "predict-pose --pose {runs}/pose_ycbv --colour-verify"),
-    RealMethod("learned_ideal_colour", "learned + colour verification", _IDEAL,
-               "predict-pose --pose {runs}/pose_ycbv_ideal --colour-verify"),
-    RealMethod("ransac_icp", "RANSAC + ICP", "", "register --method ransac --icp --workers {workers} --min-px 0"),
-    RealMethod("fgr_icp", "FGR + ICP", "", "register --method fgr --icp --workers {workers} --min-px 0"),
-    RealMethod("super4pcs_icp", "Super4PCS + ICP", "",
-               "register --method super4pcs --icp --workers {workers} --min-px 0"),
+    *(
+        RealMethod(f"learned{d}{suffix}", label, trained_on,
+                   f"predict-pose --pose {{runs}}/pose_ycbv{d}{run}" + more.replace("{d}", d))
+        for suffix, label, run, more in _LEARNED_REAL
+        for d, trained_on in (("", "ycbv (kinect depth)"), ("_ideal", "ycbv_ideal (ideal depth)"))
+    ),
+    *(
+        RealMethod(f"{algo}_icp", f"{name} + ICP", "",
+                   f"register --method {algo} --icp --workers {{workers}} --min-px 0")
+        for algo, name in HYBRID_ALGORITHMS.items()
+    ),
 )
 
 #: The profiles of the ``make reproduce`` graph (mk/profiles.mk ``PROFILES``), smallest first.

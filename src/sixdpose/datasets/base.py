@@ -7,6 +7,7 @@ Frames follow Drake/OpenCV camera conventions: camera C has +x right, +y down, +
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol, runtime_checkable
@@ -139,6 +140,26 @@ class DatasetReader(Protocol):
     @property
     def object_ids(self) -> dict[int, str]:
         """obj_id -> object name of every model of the dataset."""
+
+
+class KeyedImages:
+    """The ``torch`` map-style dataset part of a :class:`DatasetReader` that lists its images in
+    ``self._keys`` (``(scene_id, im_id)``, in order) and reads one with ``self.load``; ``reader[i]``
+    reads the instance masks when ``self.load_masks`` is true."""
+
+    _keys: list[Key]
+    load_masks: bool
+    load: Callable[..., Sample]  # the reader's DatasetReader.load
+
+    def __len__(self) -> int:
+        return len(self._keys)
+
+    def __getitem__(self, index: int) -> Sample:
+        return self.load(self._keys[index], masks=self.load_masks)
+
+    def keys(self) -> list[Key]:
+        """``(scene_id, im_id)`` of every image, in order (cached; do not modify)."""
+        return self._keys
 
 
 def collate_samples(batch: list[Sample]) -> list[Sample]:

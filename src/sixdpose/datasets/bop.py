@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import schemas
-from .base import DatasetError, Instance, ObjectModel, Sample, read_depth_png16, read_mask, read_rgb
+from .base import DatasetError, Instance, KeyedImages, ObjectModel, Sample, read_depth_png16, read_mask, read_rgb
 from .ply import read_ply, vertex_normals
 
 log = logging.getLogger(__name__)
@@ -133,7 +133,7 @@ def load_bop_camera(path: str | Path) -> BopCamera:
     return BopCamera(fx, fy, cx, cy, size[0], size[1])
 
 
-class BopDataset:
+class BopDataset(KeyedImages):
     """One split of a BOP dataset as a sequence of :class:`Sample` (metres, ``X_CO`` poses).
 
     Args:
@@ -215,17 +215,6 @@ class BopDataset:
             log.info("%s: split %r has no mask_visib; Instance.mask will be None", self.root, split)
         self._models: dict[int, ObjectModel] = {}
         self._checked: dict[tuple[int, int], tuple] = {}
-
-    # -- torch Dataset protocol -------------------------------------------------------------
-    def __len__(self) -> int:
-        return len(self._keys)
-
-    def __getitem__(self, index: int) -> Sample:
-        return self.load(self._keys[index], masks=self.load_masks)
-
-    def keys(self) -> list[tuple[int, int]]:
-        """``(scene_id, im_id)`` of every image, in order (cached; do not modify)."""
-        return self._keys
 
     # -- reading ----------------------------------------------------------------------------
     def _rgb_path(self, sid: int, im: int) -> Path:

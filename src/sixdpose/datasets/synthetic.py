@@ -11,7 +11,7 @@ import yaml
 
 from .. import schemas
 from . import layout
-from .base import DatasetError, Instance, ObjectModel, Sample, read_image, read_mask, read_rgb
+from .base import DatasetError, Instance, KeyedImages, ObjectModel, Sample, read_image, read_mask, read_rgb
 from .ply import read_ply
 
 try:  # fast YAML if libyaml is present
@@ -44,7 +44,7 @@ def load_manifest(path: Path) -> dict:
     return schemas.check(schemas.SYN_MANIFEST, data, path, DatasetError)
 
 
-class SyntheticDataset:
+class SyntheticDataset(KeyedImages):
     """The synthetic dataset, a :class:`~sixdpose.datasets.base.DatasetReader` (and a ``torch`` Dataset).
 
     Args:
@@ -87,17 +87,6 @@ class SyntheticDataset:
     def location(self) -> Path:
         """The dataset directory (where the images are)."""
         return self.root
-
-    # -- torch Dataset protocol -------------------------------------------------------------
-    def __len__(self) -> int:
-        return len(self.image_ids)
-
-    def __getitem__(self, index: int) -> Sample:
-        return self.load(self._keys[index], masks=self.load_masks)
-
-    def keys(self) -> list[tuple[int, int]]:
-        """``(scene_id, im_id)`` of every image, in order (cached; do not modify)."""
-        return self._keys
 
     # -- reading ----------------------------------------------------------------------------
     def load(self, key: tuple[int, int], *, masks: bool = True, rgb: bool = True, depth: bool = True) -> Sample:

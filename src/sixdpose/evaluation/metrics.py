@@ -420,6 +420,16 @@ def _errors_1d(errors, name: str = "errors") -> np.ndarray:
     return np.where(np.isnan(arr), np.inf, arr)
 
 
+def _errors_and_scale(errors, scale, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(e, s)``: :func:`_errors_1d` of ``errors`` (M,) and ``scale`` (scalar or (M,)) broadcast to (M,)
+    float64; ``ValueError`` naming ``name`` unless every scale is positive."""
+    e = _errors_1d(errors)
+    s = np.broadcast_to(np.asarray(scale, dtype=np.float64), e.shape)
+    if np.any(~(s > 0)):
+        raise ValueError(f"{name} must be positive")
+    return e, s
+
+
 def accuracy_curve(errors, thresholds) -> np.ndarray:
     """Fraction of instances whose error is strictly below each threshold (BOP and paper
     convention ``error < threshold``).
@@ -474,10 +484,7 @@ def ar_mssd(errors, diameters, thresholds=BOP19_MSSD_THRESHOLDS) -> float:
     Returns:
         AR_MSSD in [0, 1] (0 for M = 0).
     """
-    e = _errors_1d(errors)
-    d = np.broadcast_to(np.asarray(diameters, dtype=np.float64), e.shape)
-    if np.any(~(d > 0)):
-        raise ValueError("diameters must be positive")
+    e, d = _errors_and_scale(errors, diameters, "diameters")
     return float(accuracy_curve(e / d, thresholds).mean()) if len(e) else 0.0
 
 
@@ -493,10 +500,7 @@ def ar_mspd(errors, image_width=BOP19_MSPD_REF_WIDTH, thresholds=BOP19_MSPD_THRE
     Returns:
         AR_MSPD in [0, 1] (0 for M = 0).
     """
-    e = _errors_1d(errors)
-    w = np.broadcast_to(np.asarray(image_width, dtype=np.float64), e.shape)
-    if np.any(~(w > 0)):
-        raise ValueError("image_width must be positive")
+    e, w = _errors_and_scale(errors, image_width, "image_width")
     return float(accuracy_curve(e * (BOP19_MSPD_REF_WIDTH / w), thresholds).mean()) if len(e) else 0.0
 
 

@@ -129,6 +129,19 @@ def _check_baseline(baseline) -> float:
     return b
 
 
+def _stereo_inputs(depth, K, rng, baseline) -> tuple[np.ndarray, np.ndarray, tuple[float, float, float, float], float]:
+    """The checked arguments every baseline-based model shares, checked in this order.
+
+    Returns:
+        ``(z, valid, (fx, fy, cx, cy), baseline)``: :func:`_as_depth`'s float32 depth copy (H, W, metres)
+        and its mask, :func:`_intrinsics` of ``K``, and the baseline in metres.
+    """
+    z, valid = _as_depth(depth)
+    intrinsics = _intrinsics(K)
+    _check_rng(rng)
+    return z, valid, intrinsics, _check_baseline(baseline)
+
+
 def _check_angle(name: str, value) -> float:
     v = _check(name, value)
     if v >= np.pi / 2:
@@ -433,10 +446,7 @@ def kinect(
     Returns:
         (H, W) float32 depth in metres, 0 where invalid.
     """
-    z, valid = _as_depth(depth)
-    fx, fy, cx, cy = _intrinsics(K)
-    _check_rng(rng)
-    baseline = _check_baseline(baseline)
+    z, valid, (fx, fy, cx, cy), baseline = _stereo_inputs(depth, K, rng, baseline)
     shift_sigma = _check("pixel_shift_sigma", pixel_shift_sigma)
     step = _check("disparity_step", disparity_step)
     if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1 or window % 2 == 0:
@@ -549,10 +559,7 @@ def realsense(
     Returns:
         (H, W) float32 depth in metres, 0 where invalid.
     """
-    z, valid = _as_depth(depth)
-    fx, fy, cx, cy = _intrinsics(K)
-    _check_rng(rng)
-    baseline = _check_baseline(baseline)
+    z, valid, (fx, fy, cx, cy), baseline = _stereo_inputs(depth, K, rng, baseline)
     subpixel = _check("subpixel", subpixel)
     max_angle = _check_angle("max_angle", max_angle)
     noise_scale = _check("noise_scale", noise_scale)

@@ -100,14 +100,20 @@ def _cmd_eval(args) -> int:
     return 0
 
 
-def register(subparsers) -> None:
-    """Add ``train-seg``, ``segment`` and ``eval-seg`` to the ``sixdpose`` parser."""
-    p = subparsers.add_parser(
-        "train-seg",
-        help="train Mask R-CNN instance segmentation (paper IV-A)",
-        description="Train Mask R-CNN (ResNet-FPN) on a dataset's target objects. Profiles: smoke (CPU, "
-        "minutes) and paper (section IV-A). Multi-GPU: run under torchrun.",
-    )
+def _runtime_args(p, *, amp: bool = False, **verbose) -> None:
+    """The compute options train-seg and segment share (``--no-amp`` when ``amp``), then ``--set``;
+    ``verbose`` may set the ``help`` of ``--verbose``."""
+    O.add(p, "--workers")
+    O.add(p, "--threads")
+    O.add(p, "--device")
+    if amp:
+        p.add_argument("--no-amp", action="store_true", help="disable mixed precision on GPU")
+    O.add(p, "--no-progress")
+    O.add(p, "--verbose", **verbose)
+    add_set_option(p)
+
+
+def _train_args(p) -> None:
     O.add(p, "--data")
     O.add(p, "--out", help="run directory (config, split, checkpoints, metrics)")
     O.add_profile(p, PROFILES, help="named config: smoke (CI), cpu (2-core CPU, about 30 min on the train split), "
@@ -125,21 +131,10 @@ def register(subparsers) -> None:
     p.add_argument("--train-split", dest="train_split", type=O.Name(),
                    help="BOP split used for training (default train)")
     p.add_argument("--test-split", dest="test_split", type=O.Name(), help="BOP split used for testing (default test)")
-    O.add(p, "--workers")
-    O.add(p, "--threads")
-    O.add(p, "--device")
-    p.add_argument("--no-amp", action="store_true", help="disable mixed precision on GPU")
-    O.add(p, "--no-progress")
-    O.add(p, "--verbose", help="log every skipped instance and epoch")
-    add_set_option(p)
-    p.set_defaults(func=_train_entry)
+    _runtime_args(p, amp=True, help="log every skipped instance and epoch")
 
-    p = subparsers.add_parser(
-        "segment",
-        help="predict instance masks with a trained Mask R-CNN run",
-        description="Write PRED_DIR/<scene_id>_<im_id>.npz (masks (N,H,W) bool, labels (N,) obj ids, "
-        "scores (N,) float32) per image, and PRED_DIR/coco_results.json.",
-    )
+
+def _segment_args(p) -> None:
     O.add(p, "--data")
     O.add(p, "--seg")
     O.add(p, "--out", help="prediction directory")
@@ -148,27 +143,35 @@ def register(subparsers) -> None:
                    help="all images, or the run's train/test images")
     O.add(p, "--batch-size")
     O.add(p, "--score-thresh")
-    O.add(p, "--workers")
-    O.add(p, "--threads")
-    O.add(p, "--device")
-    O.add(p, "--no-progress")
-    O.add(p, "--verbose")
-    add_set_option(p)
-    p.set_defaults(func=_cmd_segment)
+    _runtime_args(p)
 
-    p = subparsers.add_parser(
-        "eval-seg",
-        help="COCO mask/box AP of segment's predictions",
-        description="Evaluate PRED_DIR against the dataset's ground truth with pycocotools; writes "
-        "seg_ap<TAG>.csv and .tex to --figures.",
-    )
+
+def _eval_args(p) -> None:
     O.add(p, "--data", help="dataset directory that was segmented")
     O.add(p, "--masks", required=True, help="prediction directory of `sixdpose segment`")
     p.add_argument("--figures", default="figures", help="output directory of the tables (default figures/)")
     p.add_argument("--tag", default="", type=O.Name(allow_empty=True), help="file name suffix, e.g. _smoke")
     O.add(p, "--no-progress")
     O.add(p, "--verbose")
-    p.set_defaults(func=_cmd_eval)
+
+
+def register(subparsers) -> None:
+    """Add ``train-seg``, ``segment`` and ``eval-seg`` to the ``sixdpose`` parser."""
+    commands = (  # name, help, description, options, handler
+        ("train-seg", "train Mask R-CNN instance segmentation (paper IV-A)",
+         "Train Mask R-CNN (ResNet-FPN) on a dataset's target objects. Profiles: smoke (CPU, minutes) and paper "
+         "(section IV-A). Multi-GPU: run under torchrun.", _train_args, _train_entry),
+        ("segment", "predict instance masks with a trained Mask R-CNN run",
+         "Write PRED_DIR/<scene_id>_<im_id>.npz (masks (N,H,W) bool, labels (N,) obj ids, scores (N,) float32) "
+         "per image, and PRED_DIR/coco_results.json.", _segment_args, _cmd_segment),
+        ("eval-seg", "COCO mask/box AP of segment's predictions",
+         "Evaluate PRED_DIR against the dataset's ground truth with pycocotools; writes seg_ap<TAG>.csv and .tex "
+         "to --figures.", _eval_args, _cmd_eval),
+    )
+    for name, summary, description, add_options, handler in commands:
+        p = subparsers.add_parser(name, help=summary, description=description)
+        add_options(p)
+        p.set_defaults(func=handler)
 
 
 def _train_entry(args) -> int:
