@@ -30,7 +30,8 @@ PKG = SRC / "sixdpose"
 LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("base", ("sixdpose", "sixdpose.errors", "sixdpose.constants", "sixdpose.fileio", "sixdpose.config",
               "sixdpose.logs", "sixdpose.runs", "sixdpose.geometry", "sixdpose.registry", "sixdpose.schemas",
-              "sixdpose.options", "sixdpose.graph", "sixdpose.workers")),
+              "sixdpose.options", "sixdpose.graph", "sixdpose.workers",
+              "sixdpose.lazy")),
     ("readers", ("sixdpose.datasets", "sixdpose.assets", "sixdpose.artifacts")),
     ("scoring", ("sixdpose.evaluation",)),
     ("stages", ("sixdpose.generation", "sixdpose.segmentation", "sixdpose.registration", "sixdpose.pose",

@@ -11,7 +11,7 @@ checks this and that no import cycle exists between modules or packages):
 
 1. base: ``errors``, ``constants`` (thresholds), ``registry`` (methods, profiles), ``geometry`` (``X_from``),
    ``schemas`` (file schemas), ``options`` (typed CLI options), ``graph`` (the make
-   graph's files, for notebooks), ``workers`` (pool workers), ``fileio``, ``config``, ``logs``, ``runs``;
+   graph's files, for notebooks), ``workers`` (pool workers), ``lazy``, ``fileio``, ``config``, ``logs``, ``runs``;
 2. readers and artifacts: ``datasets``, ``assets``, ``artifacts``;
 3. scoring: ``evaluation``;
 4. stages: ``generation``, ``segmentation``, ``registration``, ``pose`` (``pose`` uses ``registration``

@@ -288,6 +288,25 @@ class Config:
             raise ConfigError(f"{path}: {e}") from None
 
 
+def check_overrides(cls: type[Config], overrides: dict | None, allowed: tuple[str, ...], what: str) -> dict:
+    """``--set`` overrides of a command that may change only the fields ``allowed`` of config ``cls``
+    (e.g. at inference), checked before any work: each allowed field against its type and bounds (on
+    the default config). ``what`` names the command in the message.
+
+    Returns:
+        the overrides as a new dict.
+    Raises:
+        ConfigError: a field that is not allowed, or a bad value.
+    """
+    overrides = dict(overrides or {})
+    bad = sorted(set(overrides) - set(allowed))
+    if bad:
+        raise ConfigError(f"{what} --set: {', '.join(bad)} cannot change at inference (allowed: {', '.join(allowed)})")
+    if overrides:
+        cls().replace(**overrides)
+    return overrides
+
+
 def parse_overrides(items) -> dict[str, Any]:
     """Parse ``["key=value", ...]`` (values as YAML) into a dict; raises :class:`ConfigError` on a bad item."""
     out: dict[str, Any] = {}

@@ -307,6 +307,20 @@ def add_aliases(parser: argparse.ArgumentParser, action: argparse.Action, aliase
     action.aliases = tuple(getattr(action, "aliases", ())) + tuple(aliases)
 
 
+def add_many(parser: argparse.ArgumentParser, *flags: str) -> None:
+    """Add several shared options with their own help (:func:`add` of each ``flag``, in order)."""
+    for flag in flags:
+        add(parser, flag)
+
+
+def set_threads(threads: int | None) -> None:
+    """Apply ``--threads``: torch's CPU threads of this process (None or 0: torch's default)."""
+    if threads:
+        import torch
+
+        torch.set_num_threads(threads)
+
+
 def add_profile(parser: argparse.ArgumentParser, profiles, help: str) -> argparse.Action:
     """``--profile`` (hidden alias ``--preset``) whose choices are the names of a stage's config registry;
     its default is the command's entry in :data:`PER_COMMAND` (None: chosen by the command, e.g. the

@@ -3,17 +3,14 @@ and timing of results (:mod:`.evaluate`, :mod:`.bop`) and figures (:mod:`.visual
 the paper's tables are in :mod:`sixdpose.reporting`. Imported lazily, so building the command line does not
 load scipy."""
 
-import importlib
+from ..lazy import lazy_getattr
 
 _LAZY = {
     name: "metrics" for name in ("add", "add_or_adds", "adds", "is_correct", "rotation_error", "translation_error")
 }
 
 
-def __getattr__(name):
-    if name in _LAZY:
-        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _LAZY)  # lazy, so that building the CLI parser does not import torch
 
 
 __all__ = sorted(_LAZY)

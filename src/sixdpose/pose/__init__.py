@@ -12,32 +12,21 @@ Refiner), :mod:`.geometry` (quaternion / 6D, composition), :mod:`.loss` (ADD / c
 (instance inputs), :mod:`.train`, :mod:`.checkpoint`, :mod:`.infer` (Estimator).
 """
 
-import importlib
+from ..lazy import by_module, lazy_getattr
 
-_LAZY = {
-    "PROFILES": "config",
-    "REFINER_PROFILES": "config",
-    "PoseConfig": "config",
-    "RefinerConfig": "config",
-    "PoseNet": "model",
-    "Refiner": "model",
-    "PSPNet": "model",
-    "pose_loss": "loss",
-    "PoseError": "data",
-    "CheckpointError": "checkpoint",
-    "Estimator": "infer",
-    "predict_dataset": "infer",
-    "train_pose": "train",
-    "train_refiner": "train",
-    "ensure_trained": "train",
-    "run_ablation": "ablation",
-}
+_LAZY = by_module(
+    config=("PROFILES", "REFINER_PROFILES", "PoseConfig", "RefinerConfig"),
+    model=("PoseNet", "Refiner", "PSPNet"),
+    loss=("pose_loss",),
+    data=("PoseError",),
+    checkpoint=("CheckpointError",),
+    infer=("Estimator", "predict_dataset"),
+    train=("train_pose", "train_refiner", "ensure_trained"),
+    ablation=("run_ablation",),
+)
 
 
-def __getattr__(name):  # lazy, so that building the CLI parser does not import torch
-    if name in _LAZY:
-        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _LAZY)  # lazy, so that building the CLI parser does not import torch
 
 
 __all__ = sorted(_LAZY)

@@ -78,10 +78,7 @@ def _cmd_predict(args) -> int:
     overrides = check_inference_overrides(parse_overrides(args.overrides))  # a bad --set fails before any work
     out = Path(args.out)
     claim_output_file(out, RESULTS_HEADER)  # refuse a foreign file before any work
-    if args.threads:
-        import torch
-
-        torch.set_num_threads(args.threads)
+    O.set_threads(args.threads)
     rows, est = predict_dataset(
         args.data,
         args.pose,
@@ -173,9 +170,7 @@ def _train_args(p, refiner: bool) -> None:
     O.add(p, "--time-budget", help="seconds; once spent (checked every step) the epoch ends early and training stops "
                                    "(0: none)")
     O.add(p, "--seed", help="seed of initialisation, shuffling and sampling")
-    O.add(p, "--threads")
-    O.add(p, "--device")
-    O.add(p, "--no-progress")
+    O.add_many(p, "--threads", "--device", "--no-progress")
     O.add(p, "--verbose", help="log every epoch")
     add_set_option(p)
 
@@ -212,9 +207,7 @@ def register(subparsers) -> None:
     O.add(p, "--split")
     O.add(p, "--limit")
     O.add(p, "--out", help="results CSV to write")
-    O.add(p, "--threads")
-    O.add(p, "--device")
-    O.add(p, "--no-progress")
+    O.add_many(p, "--threads", "--device", "--no-progress")
     O.add(p, "--verbose", help="log every score-0 row's reason")
     add_set_option(p)
     p.set_defaults(func=_cmd_predict)

@@ -92,16 +92,9 @@ INFERENCE_FIELDS = ("num_points", "min_points")
 def check_inference_overrides(overrides: dict | None) -> dict:
     """``overrides`` checked before any work: only :data:`INFERENCE_FIELDS`, each of the field's type and
     bounds. Raises :class:`~sixdpose.errors.ConfigError`."""
-    from ..errors import ConfigError
+    from ..config import check_overrides
 
-    overrides = dict(overrides or {})
-    bad = sorted(set(overrides) - set(INFERENCE_FIELDS))
-    if bad:
-        raise ConfigError(f"predict-pose --set: {', '.join(bad)} cannot change at inference (allowed: "
-                          f"{', '.join(INFERENCE_FIELDS)})")
-    if overrides:
-        PoseConfig().replace(**overrides)
-    return overrides
+    return check_overrides(PoseConfig, overrides, INFERENCE_FIELDS, "predict-pose")
 
 
 class Estimator:
@@ -142,7 +135,7 @@ class Estimator:
     @classmethod
     def from_networks(cls, posenet, cfg: PoseConfig, classes, refiner=None, refiner_cfg: RefinerConfig | None = None, *,
                       iterations: int | None = None, device="cpu", reader=None,
-                      score_thresh: float = MIN_DETECTION_SCORE, seed: int = 0, max_batch: int = 64) -> "Estimator":
+                      score_thresh: float = MIN_DETECTION_SCORE, seed: int = 0, max_batch: int = 64) -> Estimator:
         """An estimator over networks already in memory (validation during training), without checkpoints.
 
         Args:

@@ -15,22 +15,15 @@ Output: ``segment`` writes the predicted-masks artifact, :mod:`sixdpose.artifact
 format, writer and reader), read by the pose stages with ``--masks PRED_DIR``.
 """
 
-import importlib
+from ..lazy import by_module, lazy_getattr
 
-_LAZY = {
-    "PROFILES": "config",
-    "SegConfig": "config",
-    "profile_config": "config",
-    "Segmenter": "infer",
-    "coco_image_id": "infer",
-    "segment": "infer",
-}
+_LAZY = by_module(
+    config=("PROFILES", "SegConfig", "profile_config"),
+    infer=("Segmenter", "coco_image_id", "segment"),
+)
 
 
-def __getattr__(name):  # lazy, so that building the CLI parser does not import torch
-    if name in _LAZY:
-        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _LAZY)  # lazy, so that building the CLI parser does not import torch
 
 
 __all__ = [

@@ -59,10 +59,7 @@ def _cmd_segment(args) -> int:
     from .infer import segment
 
     setup_logging(args.verbose)
-    if args.threads:
-        import torch
-
-        torch.set_num_threads(args.threads)
+    O.set_threads(args.threads)
     r = segment(
         args.data,
         args.ckpt,
@@ -103,9 +100,7 @@ def _cmd_eval(args) -> int:
 def _runtime_args(p, *, amp: bool = False, **verbose) -> None:
     """The compute options train-seg and segment share (``--no-amp`` when ``amp``), then ``--set``;
     ``verbose`` may set the ``help`` of ``--verbose``."""
-    O.add(p, "--workers")
-    O.add(p, "--threads")
-    O.add(p, "--device")
+    O.add_many(p, "--workers", "--threads", "--device")
     if amp:
         p.add_argument("--no-amp", action="store_true", help="disable mixed precision on GPU")
     O.add(p, "--no-progress")

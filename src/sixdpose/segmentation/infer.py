@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from ..artifacts.predictions import write_predictions, write_predictions_meta
+from ..config import check_overrides
 from ..datasets.base import DatasetError
 from ..datasets.readers import as_reader, dataset_fingerprint
 from ..errors import ConfigError
@@ -54,14 +55,7 @@ INFERENCE_FIELDS = ("score_thresh", "detections_per_img", "min_size", "max_size"
 def check_inference_overrides(overrides: dict | None) -> dict:
     """``overrides`` (field -> value) checked before any work: only :data:`INFERENCE_FIELDS`, each of
     the field's type and bounds (against the default config). Raises :class:`ConfigError`."""
-    overrides = dict(overrides or {})
-    bad = sorted(set(overrides) - set(INFERENCE_FIELDS))
-    if bad:
-        raise ConfigError(f"segment --set: {', '.join(bad)} cannot change at inference (allowed: "
-                          f"{', '.join(INFERENCE_FIELDS)})")
-    if overrides:
-        SegConfig().replace(**overrides)
-    return overrides
+    return check_overrides(SegConfig, overrides, INFERENCE_FIELDS, "segment")
 
 
 class Segmenter:

@@ -6,28 +6,16 @@ Names are imported lazily, so that the configs (which derive from :class:`~.sche
 and the CLI parser do not import torch.
 """
 
-import importlib
+from ..lazy import by_module, lazy_getattr
 
-_LAZY = {
-    "StepContext": "engine",
-    "TrainTask": "engine",
-    "ensure_trained": "engine",
-    "shard": "engine",
-    "train": "engine",
-    "TrainingError": "rundir",
-    "data_fingerprint": "rundir",
-    "read_metrics": "rundir",
-    "read_status": "rundir",
-    "RESUMABLE": "schedule",
-    "TrainSchedule": "schedule",
-    "learning_rate": "schedule",
-}
+_LAZY = by_module(
+    engine=("StepContext", "TrainTask", "ensure_trained", "shard", "train"),
+    rundir=("TrainingError", "data_fingerprint", "read_metrics", "read_status"),
+    schedule=("RESUMABLE", "TrainSchedule", "learning_rate"),
+)
 
 
-def __getattr__(name):
-    if name in _LAZY:
-        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _LAZY)  # lazy, so that building the CLI parser does not import torch
 
 
 __all__ = sorted(_LAZY)
