@@ -722,3 +722,20 @@ def test_predictions_without_fingerprint_are_accepted_with_a_warning(syn, tmp_pa
     bad = _segment_output(open_dataset(syn), tmp_path / "badfp", fingerprint="not-a-digest")
     with pytest.raises(PredictionError, match="dataset_fingerprint"):
         check_predictions_dataset(bad, open_dataset(syn))
+
+
+@pytest.mark.parametrize("info, key", [({"1": {"diameter": "big"}}, "diameter"), ({"1": {"diameter": 0}}, "diameter"),
+                                       ({"x": {"diameter": 10.0}}, "x"), ([1, 2], "models_info")])
+def test_bop_models_of_the_assets_stage_read_through_the_schema(tmp_path, info, key):
+    """``generate --bop-models`` lists a BOP models directory: its models_info.json is checked like the
+    dataset reader's (one line naming the file and the key)."""
+    from sixdpose.assets.bop import list_bop_models
+    from sixdpose.assets.ycb import AssetError
+
+    d = tmp_path / "models"
+    d.mkdir()
+    (d / "obj_000001.ply").write_text("ply\n")
+    (d / "models_info.json").write_text(json.dumps(info))
+    with pytest.raises(AssetError, match="models_info.json") as e:
+        list_bop_models(d)
+    assert key in str(e.value) and "\n" not in str(e.value)

@@ -100,17 +100,21 @@ def list_bop_models(models_dir: str | os.PathLike) -> dict[int, BopModel]:
     info = {}
     info_path = d / "models_info.json"
     if info_path.is_file():
+        from .. import schemas
+
         try:
-            info = {int(k): v for k, v in json.loads(info_path.read_text()).items()}
-        except (ValueError, AttributeError, TypeError) as e:
+            data = json.loads(info_path.read_text())
+        except (OSError, UnicodeDecodeError, ValueError) as e:
             raise AssetError(f"{info_path}: corrupt models_info.json ({e})") from None
+        info = {int(k): v for k, v in schemas.check(schemas.BOP_MODELS_INFO, data, info_path, AssetError,
+                                                    item="object").items()}
     out = {}
     for p in sorted(d.iterdir()):
         m = _OBJ_RE.match(p.name)
         if m:
             oid = int(m.group(1))
-            v = info.get(oid) if isinstance(info.get(oid), dict) else {}
-            sym = bool(v.get("symmetries_discrete")) or bool(v.get("symmetries_continuous"))
+            v = info.get(oid)
+            sym = v is not None and (bool(v.symmetries_discrete) or bool(v.symmetries_continuous))
             out[oid] = BopModel(oid, bop_name(oid), p.resolve(), sym)
     if not out:
         raise AssetError(f"{d}: no BOP models (obj_NNNNNN.ply) in this directory")

@@ -119,13 +119,15 @@ def resting_penetrations(
         ``{"table": metres the lowest contact point of an object on the table lies below the table
         top, "pairs": largest box-box penetration between two objects, "pair": (name, name)}``.
     """
-    import json
-
     from ..assets import physical_properties
+    from ..datasets.base import DatasetError
+    from ..datasets.synthetic import load_manifest
     from .config import GenerationConfig
 
     root = Path(dataset_dir)
-    man = json.loads((root / "manifest.json").read_text())
+    man = load_manifest(root / "manifest.json")
+    if not man:
+        raise DatasetError(f"{root}: no manifest.json (not a generated dataset)")
     cfg = GenerationConfig.from_dict(man["config"])
     mesh_of = _mesh_source(root, assets, bop_models)
     worst_table, worst_pair, pair = 0.0, 0.0, None
