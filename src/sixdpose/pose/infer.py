@@ -4,10 +4,12 @@
 :class:`~sixdpose.datasets.base.Sample` (with ground-truth or predicted masks) into
 :class:`~sixdpose.artifacts.poses.PoseEstimate` rows: all usable instances of the frame go through one
 batched forward pass (one CNN pass over the image, or over the batch of crops), then ``iterations``
-refinement steps, then optionally Open3D ICP (the hybrid stage's ``refine_icp`` with the ``default``
+refinement steps (a ``dense`` head instead: per-point object coordinates, then RANSAC + weighted
+Kabsch, :mod:`.dense`), then optionally Open3D ICP (the hybrid stage's ``refine_icp`` with the ``default``
 registration preset) and/or the hybrid stage's colour verification (``colour_search``). Unusable
-instances (too few valid depth pixels, an object id the checkpoint has no class for) get score-0
-rows with the reason. ``time`` covers everything but disk reads (paper section V-A).
+instances (too few valid depth pixels, an object id the checkpoint has no class for or whose class
+saw no training instance) get score-0 rows with the reason. ``time`` covers everything but disk reads
+(paper section V-A).
 """
 
 from __future__ import annotations
@@ -142,6 +144,12 @@ class Estimator:
             raise PoseError(f"iterations must be >= 0, got {self.iterations}")
         if self.iterations and self.refiner is None:
             raise PoseError(f"--iterations {self.iterations} needs a refiner run (--refiner)")
+        self.dense = getattr(cfg, "head", "paper") == "dense"
+        if self.dense and self.refiner is not None:
+            raise PoseError("the refiner works on the paper head's poses, not on a dense pose run (drop --refiner)")
+        # classes the network saw no training instance of (a count of -1: unknown, predicted as before)
+        seen = getattr(net, "seen", None)
+        self.unseen = {int(c[0]) for k, c in enumerate(self.classes) if seen is not None and float(seen[k]) == 0}
         self.icp, self.colour_verify, self.reader = icp, colour_verify, reader
         self._diameters: dict[int, float] = {}
         self.score_thresh, self.seed, self.max_batch = score_thresh, seed, max_batch
@@ -194,6 +202,10 @@ class Estimator:
             if oid not in self.class_index:
                 rows[k] = PoseEstimate.failed(sample.scene_id, sample.im_id, oid, f"object id {oid} is not a class of the pose run")
                 continue
+            if oid in self.unseen:
+                rows[k] = PoseEstimate.failed(sample.scene_id, sample.im_id, oid,
+                                              f"object id {oid}: the pose run saw no training instance of it")
+                continue
             if mask is None or np.shape(mask) != sample.depth.shape:
                 rows[k] = PoseEstimate.failed(sample.scene_id, sample.im_id, oid, "mask missing or of another size than the image")
                 continue
@@ -208,7 +220,11 @@ class Estimator:
         for s in range(0, len(usable), step):
             chunk = usable[s:s + step]
             batch = collate_frames([Frame(None if self.cfg.crop else sample.rgb, chunk)], self.class_index)
-            R, t = run_networks(self.net, self.refiner, batch, self.iterations, self.device, amp=True)
+            if self.dense:
+                R, t = self._dense_poses(batch, chunk, np.random.default_rng([self.seed, int(sample.scene_id),
+                                                                              int(sample.im_id), 1]))
+            else:
+                R, t = run_networks(self.net, self.refiner, batch, self.iterations, self.device, amp=True)
             for inst, Ri, ti in zip(chunk, R, t):
                 Ri = _orthonormalise(Ri)
                 Ri, ti = self._post(inst, Ri, ti)
@@ -219,6 +235,26 @@ class Estimator:
             if r.reason:
                 log.info("scene %d image %d obj %d: %s", r.scene_id, r.im_id, r.obj_id, r.reason)
         return rows
+
+    def _dense_poses(self, batch: dict, insts, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Poses of a dense-head batch: per-point object coordinates and confidences from the network, then
+        :func:`~sixdpose.pose.dense.ransac_kabsch` of the coordinates onto each instance's sampled cloud.
+        Returns ``(R (N, 3, 3), t (N, 3))`` float64, ``X_CO`` in metres."""
+        from .dense import ransac_kabsch
+
+        dev = self.device
+        with torch.no_grad(), torch.autocast("cuda", dtype=torch.float16, enabled=dev.type == "cuda"):
+            out = self.net(batch["images"].to(dev), batch["img_index"].to(dev), batch["choose"].to(dev),
+                           batch["cloud"].to(dev), batch["obj_index"].to(dev))
+        coords = out["coords"].float().cpu().double().numpy()
+        conf = torch.sigmoid(out["conf_logit"].float()).cpu().double().numpy()
+        Rs, ts = [], []
+        for inst, y, c in zip(insts, coords, conf, strict=True):
+            R, t, _ = ransac_kabsch(y, inst.cloud, c, threshold=self.cfg.ransac_threshold,
+                                    iterations=self.cfg.ransac_iterations, rng=rng)
+            Rs.append(R)
+            ts.append(t)
+        return np.stack(Rs), np.stack(ts)
 
     def _diameter(self, obj_id: int) -> float:
         """The object's diameter in metres from the reader's model (0.0 without a reader): the depth band

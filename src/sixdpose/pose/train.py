@@ -33,6 +33,7 @@ from ..training import train as _engine_train
 from . import checkpoint as ck
 from .config import PoseConfig, RefinerConfig, profile_config, refiner_profile_config
 from .data import FrameDataset, PoseError, collate_frames, collate_list, sample_model_points
+from .dense import coordinate_targets, dense_loss, model_symmetry
 from .geometry import compose_refinement, perturb_poses, to_object_frame
 from .loss import pose_loss
 from .model import build_posenet, build_refiner
@@ -103,6 +104,9 @@ class PoseTask(TrainTask):
             self.pose_ckpt = ck.load(self.pose_run, kind="pose")
             # built here, before the engine seeds the refiner's initialisation
             self.posenet, self.pose_cfg = load_posenet(self.pose_ckpt, "cpu")
+            if self.pose_cfg.head != "paper":
+                raise PoseError(f"{self.pose_ckpt['path']}: the refiner works on the paper head's poses, not on a "
+                                f"{self.pose_cfg.head} pose run")
             for p in self.posenet.parameters():
                 p.requires_grad_(False)
         self.reader = reader
@@ -149,6 +153,9 @@ class PoseTask(TrainTask):
             for oid, pts in self.model_points.items():
                 centres[self.class_index[oid]] = (pts.min(0) + pts.max(0)) / 2.0
             net.set_centres(centres)
+            net.seen.zero_()  # counted from here (a resumed run's count comes with its weights)
+            self.symmetries = {oid: model_symmetry(reader.model(oid)) for oid in self.model_points} \
+                if cfg.head == "dense" else {}
         else:
             net = build_refiner(cfg, len(classes), int(pose_ckpt["arch"]["emb_dim"]))
         self.val_reader = as_reader(self.val, split="test") if self.val is not None else None
@@ -181,6 +188,16 @@ class PoseTask(TrainTask):
         R_gt, t_gt = batch["R"].to(dev), batch["t"].to(dev)
         cloud, obj = batch["cloud"].to(dev), batch["obj_index"].to(dev)
         images, img_index, choose = batch["images"].to(dev), batch["img_index"].to(dev), batch["choose"].to(dev)
+        if is_pose:
+            self._count(net, obj, ctx)
+        if is_pose and cfg.head == "dense":
+            tg = [coordinate_targets(i.cloud, i.R, i.t, self.symmetries[i.obj_id]) for i in insts]
+            S = max(len(x) for x in tg)
+            tg = np.stack([np.concatenate([x, np.repeat(x[:1], S - len(x), axis=0)]) for x in tg])
+            with ctx.autocast():
+                out = net(images, img_index, choose, cloud, obj)
+            loss, _ = dense_loss(out["coords"].float(), out["conf_logit"].float(), torch.from_numpy(tg).to(dev))
+            return {"loss": loss.mean()}
         with ctx.autocast():
             if is_pose:
                 out = net(images, img_index, choose, cloud, obj)
@@ -197,6 +214,18 @@ class PoseTask(TrainTask):
                     R_r, t_r = net(to_object_frame(cloud, R, t), emb, obj)
                     R, t = compose_refinement(R, t, R_r.float(), t_r.float())
         return {"loss": pose_loss(R.float(), t.float(), R_gt, t_gt, mp, symm).mean()}
+
+    @staticmethod
+    def _count(net, obj, ctx: StepContext) -> None:
+        """Add the step's instances per class (over every rank) to the network's ``seen`` buffer."""
+        model = getattr(net, "module", net)
+        counts = torch.bincount(obj, minlength=model.num_classes).to(model.seen.dtype)
+        if ctx.world > 1:
+            import torch.distributed as dist
+
+            dist.all_reduce(counts)
+        with torch.no_grad():
+            model.seen.copy_(torch.where(model.seen >= 0, model.seen + counts, model.seen))
 
     def validate(self, model, epoch):
         """``val_add`` (%) on the validation set, if one was given."""
