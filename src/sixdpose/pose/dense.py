@@ -247,9 +247,9 @@ def ransac_kabsch(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None =
     rng = rng or np.random.default_rng(0)
     w = np.ones(K) if weights is None else np.clip(np.asarray(weights, float), 1e-12, None)
     p = w / w.sum()
-    idx = np.stack([rng.choice(K, 3, replace=False, p=p) for _ in range(iterations)])
+    idx = rng.choice(K, size=(iterations, 3), p=p)  # a triplet with a repeated point scores low: no need to redraw
     Rs, ts = kabsch_batch(src[idx], dst[idx])
-    res = np.linalg.norm(np.einsum("mij,kj->mki", Rs, src) + ts[:, None] - dst[None], axis=2)  # (M, K)
+    res = np.linalg.norm(src @ Rs.transpose(0, 2, 1) + ts[:, None] - dst[None], axis=2)  # (M, K)
     score = ((res < threshold) * w[None]).sum(axis=1)
     best = int(np.argmax(score))
     R, t = Rs[best], ts[best]
