@@ -224,8 +224,9 @@ def test_class_without_training_instances_is_skipped_with_reason(tmp_path, head)
     ds = _two_object_dataset(tmp_path / "ds")
     reader = as_reader(ds)
     assert reader.keys()[-1] == (0, 3)
-    train_pose(ds, tmp_path / "run", profile="smoke", progress=False, head=head, epochs=1, repeat=1, max_images=3,
-               batch_size=3)
+    s = train_pose(ds, tmp_path / "run", profile="smoke", progress=False, head=head, epochs=1, repeat=1, max_images=3,
+                   batch_size=3, val=ds)
+    assert s["val_add"] is not None  # validated through the estimator over the networks in memory
     seen = ck.load(tmp_path / "run")["model"]["seen"].tolist()
     assert seen == [3.0, 0.0]  # the last image (the only one with OID + 1) was not trained on
     rows, _ = predict_dataset(ds, tmp_path / "run", device="cpu")

@@ -73,7 +73,10 @@ def validate_accuracy(reader, posenet, cfg, classes, device, refiner=None, itera
 class PoseTask(TrainTask):
     """The main pose network (``kind="pose"``) or the refiner on a finished main network (``"refiner"``)
     as a task of the training engine: frames of the reader's images, the ADD(-S)/chamfer loss of
-    :func:`~.loss.pose_loss` (metres), ``val_add`` on an optional validation set after every epoch."""
+    :func:`~.loss.pose_loss` (metres; the dense head: :func:`~.dense.dense_loss` on the object coordinates
+    of :func:`~.dense.coordinate_targets`), ``val_add`` on an optional validation set after every epoch.
+    The main network's ``seen`` buffer counts the training instances of every class (inference skips a
+    class it never saw)."""
 
     loss_fields = ()
     val_fields = ("val_add",)
