@@ -136,6 +136,19 @@ def test_discover_symmetries_of_shapes():
     assert discover_symmetries(P, diam).trivial
 
 
+def test_model_symmetry_reads_bop_annotations():
+    from sixdpose.datasets.base import ObjectModel
+    from sixdpose.pose.dense import model_symmetry
+
+    P, N, C, diam = make_shape(0.004, 0)
+    flip = [1, 0, 0, 20.0, 0, -1, 0, 0, 0, 0, -1, 0, 0, 0, 0, 1]  # row-major: half turn about x, 20 mm along x
+    ann = {"symmetries_discrete": [flip], "symmetries_continuous": [{"axis": [0, 0, 2], "offset": [5, 0, 0]}]}
+    s = model_symmetry(ObjectModel("o", 1, P, N, C, diam, True, symmetries=ann))
+    assert np.allclose(s.axis, [0, 0, 1]) and np.allclose(s.offset, [0.005, 0, 0]) and abs(s.ref @ s.axis) < 1e-12
+    assert len(s.R) == 2 and np.allclose(s.R[1], np.diag([1, -1, -1])) and np.allclose(s.t[1], [0.02, 0, 0])
+    assert model_symmetry(ObjectModel("o", 1, P, N, C, diam, False)).trivial
+
+
 # ---------------------------------------------------------------- training, resume, inference
 @pytest.fixture(scope="module")
 def pose_ds(tmp_path_factory) -> Path:
