@@ -2,7 +2,8 @@
 
 Usage::
 
-    python benchmarks/pose.py [--profile cpu|smoke|paper] [--pose RUN --refiner RUN2] [--device cpu|cuda]
+    python benchmarks/pose.py [--profile cpu|smoke|paper] [--head paper|dense] [--pose RUN --refiner RUN2]
+                              [--device cpu|cuda]
                               [--instances 6] [--frames 10] [--steps 10] [--threads N] [--json OUT]
                               [--seg SEG_RUN --data DIR]
                               [--results-dir results] [--result-name pose_<profile>_<device>] [--no-result]
@@ -12,7 +13,9 @@ Usage::
   or full images, the profile's point counts), after 2 warm-up steps.
 * Inference FPS (paper section V-A): :meth:`Estimator.predict` on one 640x480 RGB-D frame holding
   ``--instances`` masked objects: point sampling, crops, one batched forward of every instance, 2
-  refinement iterations, copies to the CPU. Frames are built in memory beforehand (no disk reads);
+  refinement iterations, copies to the CPU (``--head dense``: the dense head's per-point coordinates
+  and its RANSAC + weighted Kabsch fit per instance instead of the refiner; its training step is the
+  dense loss on random targets, and it has no refiner). Frames are built in memory beforehand (no disk reads);
   segmentation is not included. Without ``--pose`` untrained networks of the profile are timed
   (the cost does not depend on the weights).
 * With ``--seg SEG_RUN --data DIR`` (trained runs): end-to-end FPS on the dataset's first ``--frames``
@@ -20,7 +23,8 @@ Usage::
   refinement iterations on every detection of the frame in one batch (section V-A: disk reads excluded).
 * Peak memory: CPU: the process' peak resident set size (MiB); CUDA: ``torch.cuda.max_memory_allocated``.
 
-The figures are also written as the result artifact ``results/pose_<profile>_<device>.json``.
+The figures are also written as the result artifact ``results/pose_<profile>_<device>.json``
+(``pose_<profile>_dense_<device>.json`` for ``--head dense``).
 """
 
 from __future__ import annotations
@@ -41,12 +45,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 from sixdpose.artifacts.results import add_result_arguments, save_from_args, script_command  # noqa: E402
 from sixdpose.datasets.base import Instance, Sample  # noqa: E402
 from sixdpose.pose import checkpoint as ck  # noqa: E402
-from sixdpose.runs import save_checkpoint  # noqa: E402
 from sixdpose.pose.config import profile_config, refiner_profile_config  # noqa: E402
+from sixdpose.pose.dense import dense_loss  # noqa: E402
 from sixdpose.pose.geometry import compose_refinement, to_object_frame  # noqa: E402
 from sixdpose.pose.infer import Estimator  # noqa: E402
 from sixdpose.pose.loss import pose_loss  # noqa: E402
 from sixdpose.pose.model import build_posenet, build_refiner  # noqa: E402
+from sixdpose.runs import save_checkpoint  # noqa: E402
 
 K = np.array([[615.0, 0, 319.5], [0, 615.0, 239.5], [0, 0, 1]])
 
@@ -74,16 +79,18 @@ def synthetic_frame(n: int, seed: int = 0) -> Sample:
     return Sample(0, 0, rgb, depth, K, insts)
 
 
-def fake_runs(profile: str, tmp: Path, classes: int = 21):
-    """Untrained pose and refiner checkpoints of a profile (for timing only)."""
-    cfg, rcfg = profile_config(profile), refiner_profile_config(profile)
+def fake_runs(profile: str, tmp: Path, classes: int = 21, head: str = "paper"):
+    """Untrained pose and refiner checkpoints of a profile (for timing only; no refiner for the dense head)."""
+    cfg, rcfg = profile_config(profile, {"head": head}), refiner_profile_config(profile)
     cls = [[i + 1, f"obj{i + 1}", False] for i in range(classes)]
     net, ref = build_posenet(cfg, classes), build_refiner(rcfg, classes, cfg.emb_dim)
-    base = {"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "classes": cls, "epoch": 0, "global_step": 0, "elapsed": 0.0}
-    save_checkpoint(dict(base, kind="pose", config=cfg.to_dict(), arch=cfg.arch(), model=net.state_dict()), tmp / "pose.pt")
+    base = {"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "classes": cls, "epoch": 0, "global_step": 0,
+            "elapsed": 0.0}
+    save_checkpoint(dict(base, kind="pose", config=cfg.to_dict(), arch=cfg.arch(), model=net.state_dict()),
+                    tmp / "pose.pt")
     save_checkpoint(dict(base, kind="refiner", config=rcfg.to_dict(), arch=rcfg.arch(), model=ref.state_dict(),
                         pose={"classes": cls, "arch": cfg.arch(), "run": str(tmp / "pose.pt")}), tmp / "ref.pt")
-    return tmp / "pose.pt", tmp / "ref.pt"
+    return tmp / "pose.pt", (tmp / "ref.pt" if head == "paper" else None)
 
 
 def timed(fn, items, device) -> list[float]:
@@ -101,9 +108,10 @@ def timed(fn, items, device) -> list[float]:
     return times
 
 
-def train_throughput(profile: str, device, steps: int, inst_per_image: int = 6, classes: int = 21) -> dict:
-    """Instances per second of optimiser steps of the main network and of the refiner."""
-    cfg, rcfg = profile_config(profile), refiner_profile_config(profile)
+def train_throughput(profile: str, device, steps: int, inst_per_image: int = 6, classes: int = 21,
+                     head: str = "paper") -> dict:
+    """Instances per second of optimiser steps of the main network and of the refiner (paper head)."""
+    cfg, rcfg = profile_config(profile, {"head": head}), refiner_profile_config(profile)
     torch.manual_seed(0)
     net = build_posenet(cfg, classes).to(device).train()
     ref = build_refiner(rcfg, classes, cfg.emb_dim).to(device).train()
@@ -122,10 +130,15 @@ def train_throughput(profile: str, device, steps: int, inst_per_image: int = 6, 
     sym = torch.zeros(n, dtype=torch.bool, device=device)
     amp = device.type == "cuda"
 
+    targets = torch.randn(n, 1, P, 3, device=device) * 0.05
+
     def step_main():
         with torch.autocast("cuda", dtype=torch.float16, enabled=amp):
             out = net(imgs, img_index, choose, cloud, obj)
-        loss = pose_loss(out["R"].float(), out["t"].float(), R_gt, t_gt, mp, sym).mean()
+        if head == "dense":
+            loss = dense_loss(out["coords"].float(), out["conf_logit"].float(), targets)[0].mean()
+        else:
+            loss = pose_loss(out["R"].float(), out["t"].float(), R_gt, t_gt, mp, sym).mean()
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -143,20 +156,20 @@ def train_throughput(profile: str, device, steps: int, inst_per_image: int = 6, 
         ropt.step()
 
     res = {}
-    for name, fn in (("pose", step_main), ("refiner", step_ref)):
+    for name, fn in (("pose", step_main), ("refiner", step_ref))[: 1 if head == "dense" else 2]:
         for _ in range(2):
             fn()
-        res[f"train_{name}_instances_per_s"] = n * steps / sum(timed(lambda _: fn(), range(steps), device))
+        res[f"train_{name}_instances_per_s"] = n * steps / sum(timed(lambda _, f=fn: f(), range(steps), device))
     res["train_instances_per_step"] = n
     return res
 
 
 def inference_fps(pose, refiner, device, instances: int, frames: int) -> dict:
-    """End-to-end frames per second of Estimator.predict (pose net + 2 refinement iterations)."""
-    est = Estimator(pose, refiner, iterations=2, device=str(device))
+    """End-to-end frames per second of Estimator.predict (pose net + 2 refinement iterations, or the dense
+    head's robust fit when ``refiner`` is None)."""
+    est = Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device))
     frame = synthetic_frame(instances)
-    for r in est.predict(frame):  # warm-up (first-call allocations)
-        pass
+    est.predict(frame)  # warm-up (first-call allocations)
     times = timed(lambda _: est.predict(frame), range(frames), device)
     return {"infer_fps": 1.0 / float(np.mean(times)), "infer_ms_per_frame": 1000 * float(np.mean(times)),
             "infer_instances_per_frame": instances}
@@ -171,11 +184,12 @@ def end_to_end_fps(seg, pose, refiner, data, device, frames: int) -> dict:
     reader = as_reader(data, split="test")
     samples = [reader.load(k, masks=False) for k in reader.keys()[: frames + 1]]  # disk reads not timed
     segm = Segmenter(seg, device=str(device))
-    est = Estimator(pose, refiner, iterations=2, device=str(device))  # detections scored >= 0.5, as predict-pose
+    est = Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device))  # scores >= 0.5, as predict-pose
 
     def run(sample):
         out = segm.predict([sample.rgb])[0]
-        dets = [Detection(int(o), float(s), m) for o, s, m in zip(out["labels"], out["scores"], out["masks"])]
+        found = zip(out["labels"], out["scores"], out["masks"], strict=True)
+        dets = [Detection(int(o), float(s), m) for o, s, m in found]
         return est.predict(sample, dets), len(dets)
 
     run(samples[0])  # warm-up
@@ -190,6 +204,8 @@ def main(argv=None) -> int:
     """Parse the arguments, run the benchmarks, print (and optionally save) the figures."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--profile", default="cpu", choices=("smoke", "cpu", "paper"))
+    ap.add_argument("--head", default="paper", choices=("paper", "dense"),
+                    help="the untrained networks' head (without --pose)")
     ap.add_argument("--pose", default=None, help="a trained pose run (default: untrained networks of --profile)")
     ap.add_argument("--refiner", default=None, help="a trained refiner run (with --pose)")
     ap.add_argument("--device", default="cpu")
@@ -199,11 +215,12 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--json", default=None)
     ap.add_argument("--seg", default=None, help="a trained segmentation run: also time segmentation + pose end to end")
-    ap.add_argument("--data", default=None, help="dataset whose first --frames frames the end-to-end timing uses (with --seg)")
+    ap.add_argument("--data", default=None,
+                    help="dataset whose first --frames frames the end-to-end timing uses (with --seg)")
     add_result_arguments(ap, None, Path(__file__).resolve().parents[1] / "results", "pose_<profile>_<device>")
     a = ap.parse_args(argv)
     if a.result_name is None:
-        a.result_name = f"pose_{a.profile}_{torch.device(a.device).type}"
+        a.result_name = f"pose_{a.profile}_{'dense_' if a.head == 'dense' else ''}{torch.device(a.device).type}"
     if (a.seg is None) != (a.data is None) or (a.seg and not a.pose):
         print("--seg and --data go together, and need --pose (and --refiner)", file=sys.stderr)
         return 2
@@ -213,16 +230,16 @@ def main(argv=None) -> int:
     if device.type == "cuda" and not torch.cuda.is_available():
         print("CUDA is not available", file=sys.stderr)
         return 2
-    out = {"profile": a.profile, "device": str(device), "threads": torch.get_num_threads()}
+    out = {"profile": a.profile, "head": a.head, "device": str(device), "threads": torch.get_num_threads()}
     with tempfile.TemporaryDirectory() as tmp:
-        pose, ref = (a.pose, a.refiner) if a.pose else fake_runs(a.profile, Path(tmp))
+        pose, ref = (a.pose, a.refiner) if a.pose else fake_runs(a.profile, Path(tmp), head=a.head)
         out.update(inference_fps(pose, ref, device, a.instances, a.frames))
         out["infer_peak_mib"] = peak_mib(device)
         if a.seg:
             out.update(end_to_end_fps(a.seg, pose, ref, a.data, device, a.frames))
         if device.type == "cuda":
             torch.cuda.reset_peak_memory_stats(device)
-        out.update(train_throughput(a.profile, device, a.steps, a.instances))
+        out.update(train_throughput(a.profile, device, a.steps, a.instances, head=a.head))
         out["train_peak_mib"] = peak_mib(device)
     for k, v in out.items():
         print(f"{k:32s} {v:.2f}" if isinstance(v, float) else f"{k:32s} {v}")
@@ -230,15 +247,18 @@ def main(argv=None) -> int:
         Path(a.json).write_text(json.dumps(out, indent=1) + "\n")
     suffix_units = {"instances_per_s": "instances/s", "_fps": "frames/s", "_ms_per_frame": "ms", "_mib": "MiB"}
     units = {k: u for k in out for end, u in suffix_units.items() if k.endswith(end)}
+    nets = "trained runs" if a.pose else f"untrained {a.profile} networks"
     save_from_args(a, out, command=script_command(__file__, argv), units=units,
-                   description=f"learned pose stage ({'trained runs' if a.pose else 'untrained ' + a.profile + ' networks'}) "
+                   description=f"learned pose stage ({nets}) "
                                f"on {out['device']}: inference FPS with {a.instances} instances per frame "
-                               f"(+ 2 refinement iterations), training instances/s, peak memory"
+                               + ("(+ 2 refinement iterations)" if a.head == "paper" else "(dense head, RANSAC fit)")
+                               + ", training instances/s, peak memory"
                                + ("; end to end with segmentation on " + Path(a.data).name if a.seg else ""),
-                   config={"profile": a.profile, "pose": a.pose, "refiner": a.refiner, "device": a.device,
-                           "instances": a.instances, "frames": a.frames, "steps": a.steps, "threads": a.threads,
-                           "seg": a.seg, "data": a.data,
-                           "pose_config": profile_config(a.profile).to_dict() if not a.pose else None})
+                   config={"profile": a.profile, "head": a.head, "pose": a.pose, "refiner": a.refiner,
+                           "device": a.device, "instances": a.instances, "frames": a.frames, "steps": a.steps,
+                           "threads": a.threads, "seg": a.seg, "data": a.data,
+                           "pose_config": profile_config(a.profile, {"head": a.head}).to_dict()
+                           if not a.pose else None})
     return 0
 
 

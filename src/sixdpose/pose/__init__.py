@@ -9,7 +9,9 @@ Stage commands (see :mod:`.cli`)::
 
 Modules: :mod:`.config` (PoseConfig, RefinerConfig, profiles), :mod:`.model` (PSPNet, PoseNet,
 Refiner), :mod:`.geometry` (quaternion / 6D, composition), :mod:`.loss` (ADD / chamfer), :mod:`.data`
-(instance inputs), :mod:`.train`, :mod:`.checkpoint`, :mod:`.infer` (Estimator).
+(instance inputs), :mod:`.dense` (the project's dense head: object-coordinate targets under symmetries,
+loss, RANSAC + weighted Kabsch; ``train-pose --set head=dense``), :mod:`.train`, :mod:`.checkpoint`,
+:mod:`.infer` (Estimator).
 """
 
 from ..lazy import by_module, lazy_getattr

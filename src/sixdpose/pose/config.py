@@ -37,6 +37,7 @@ from ..training.schedule import TrainSchedule
 TRANSLATIONS = ("absolute", "centroid_offset")
 ROTATIONS = ("quaternion", "6d")
 NORMS = ("none", "group", "batch")
+HEADS = ("paper", "dense")
 
 
 @dataclass(frozen=True)
@@ -88,6 +89,11 @@ class PoseConfig(FrameSchedule):
         rotation: ``quaternion`` (normalised, the paper) or ``6d`` (Zhou et al. 2019, Gram-Schmidt).
         norm: ``none`` (the paper: no normalisation layers), ``group`` (GroupNorm) or ``batch``
             (BatchNorm) after every convolution of the CNN and the point branches.
+        head: ``paper`` (rotation and translation regression, section IV-C) or ``dense`` (the project's
+            own: per-point object coordinates and confidences, the pose by RANSAC + weighted Kabsch;
+            :mod:`sixdpose.pose.dense`; ``translation`` and ``rotation`` are then unused).
+        ransac_threshold: inlier distance (metres) of the dense head's robust fit at inference.
+        ransac_iterations: hypotheses of that fit.
 
     Data:
         num_points: masked pixels with valid depth sampled per instance (fewer: wrapped repeats).
@@ -121,6 +127,9 @@ class PoseConfig(FrameSchedule):
     translation: str = "absolute"
     rotation: str = "quaternion"
     norm: str = "none"
+    head: str = "paper"
+    ransac_threshold: float = bounded(0.015, min=0, max=1, min_open=True)
+    ransac_iterations: int = bounded(128, min=1, max=100_000)
     rgb_noise: float = bounded(0.3, min=0, max=1)
     colour_jitter: float = bounded(0.0, min=0, max=1, max_open=True)
     lr: float = bounded(1e-4, min=0, max=10, min_open=True)
@@ -138,6 +147,10 @@ class PoseConfig(FrameSchedule):
             raise ValueError(f"rotation must be one of {ROTATIONS}, got {self.rotation!r}")
         if self.norm not in NORMS:
             raise ValueError(f"norm must be one of {NORMS}, got {self.norm!r}")
+        if self.head not in HEADS:
+            raise ValueError(f"head must be one of {HEADS}, got {self.head!r}")
+        if not self.ransac_threshold > 0 or self.ransac_iterations < 1:
+            raise ValueError("ransac_threshold must be > 0 and ransac_iterations >= 1")
         if self.emb_dim < 1 or self.rgb_noise < 0:
             raise ValueError("emb_dim must be >= 1 and rgb_noise >= 0")
         if not 0 <= self.colour_jitter < 1:
@@ -145,7 +158,10 @@ class PoseConfig(FrameSchedule):
 
     def arch(self) -> dict:
         """The fields that define the network's shapes (checked when loading weights)."""
-        return {k: getattr(self, k) for k in ("width", "emb_dim", "crop", "translation", "rotation", "norm")}
+        arch = {k: getattr(self, k) for k in ("width", "emb_dim", "crop", "translation", "rotation", "norm")}
+        if self.head != "paper":  # the paper head's arch is unchanged (checkpoints from before the field)
+            arch["head"] = self.head
+        return arch
 
 
 @dataclass(frozen=True)

@@ -4,10 +4,12 @@
 :class:`~sixdpose.datasets.base.Sample` (with ground-truth or predicted masks) into
 :class:`~sixdpose.artifacts.poses.PoseEstimate` rows: all usable instances of the frame go through one
 batched forward pass (one CNN pass over the image, or over the batch of crops), then ``iterations``
-refinement steps, then optionally Open3D ICP (the hybrid stage's ``refine_icp`` with the ``default``
+refinement steps (a ``dense`` head instead: per-point object coordinates, then RANSAC + weighted
+Kabsch, :mod:`.dense`), then optionally Open3D ICP (the hybrid stage's ``refine_icp`` with the ``default``
 registration preset) and/or the hybrid stage's colour verification (``colour_search``). Unusable
-instances (too few valid depth pixels, an object id the checkpoint has no class for) get score-0
-rows with the reason. ``time`` covers everything but disk reads (paper section V-A).
+instances (too few valid depth pixels, an object id the checkpoint has no class for or whose class
+saw no training instance) get score-0 rows with the reason. ``time`` covers everything but disk reads
+(paper section V-A).
 """
 
 from __future__ import annotations
@@ -32,15 +34,21 @@ from .model import build_posenet, build_refiner
 log = logging.getLogger("sixdpose.pose")
 
 
+def _with_weights(net, ckpt: dict, device):
+    """``net`` with the checkpoint's weights, on ``device``, in eval mode; CheckpointError if they do not fit."""
+    try:
+        net.load_state_dict(ckpt["model"])
+    except (RuntimeError, KeyError) as e:
+        first = str(e).splitlines()[0][:200]
+        raise ck.CheckpointError(f"{ckpt['path']}: weights do not fit the saved architecture ({first})") from None
+    return net.to(device).eval()
+
+
 def load_posenet(ckpt: dict, device="cpu"):
     """``(PoseNet in eval mode, PoseConfig)`` of a validated ``pose`` checkpoint dict."""
     cfg = PoseConfig.from_dict(ckpt["config"])
     net = build_posenet(cfg, len(ckpt["classes"]))
-    try:
-        net.load_state_dict(ckpt["model"])
-    except (RuntimeError, KeyError) as e:
-        raise ck.CheckpointError(f"{ckpt['path']}: weights do not fit the saved architecture ({str(e).splitlines()[0][:200]})") from None
-    return net.to(device).eval(), cfg
+    return _with_weights(net, ckpt, device), cfg
 
 
 def load_refiner(ckpt: dict, pose_ckpt: dict, device="cpu"):
@@ -48,11 +56,7 @@ def load_refiner(ckpt: dict, pose_ckpt: dict, device="cpu"):
     ck.check_refiner_matches(ckpt, pose_ckpt)
     cfg = RefinerConfig.from_dict(ckpt["config"])
     net = build_refiner(cfg, len(ckpt["classes"]), int(pose_ckpt["arch"]["emb_dim"]))
-    try:
-        net.load_state_dict(ckpt["model"])
-    except (RuntimeError, KeyError) as e:
-        raise ck.CheckpointError(f"{ckpt['path']}: weights do not fit the saved architecture ({str(e).splitlines()[0][:200]})") from None
-    return net.to(device).eval(), cfg
+    return _with_weights(net, ckpt, device), cfg
 
 
 def run_networks(posenet, refiner, batch: dict, iterations: int, device, amp: bool = False):
@@ -64,7 +68,8 @@ def run_networks(posenet, refiner, batch: dict, iterations: int, device, amp: bo
     Returns:
         ``(R (N, 3, 3), t (N, 3))`` float64 numpy, ``X_CO`` in metres.
     """
-    with torch.no_grad(), torch.autocast("cuda", dtype=torch.float16, enabled=amp and torch.device(device).type == "cuda"):
+    on_cuda = torch.device(device).type == "cuda"
+    with torch.no_grad(), torch.autocast("cuda", dtype=torch.float16, enabled=amp and on_cuda):
         cloud = batch["cloud"].to(device)
         obj = batch["obj_index"].to(device)
         out = posenet(batch["images"].to(device), batch["img_index"].to(device), batch["choose"].to(device), cloud, obj)
@@ -114,9 +119,10 @@ class Estimator:
         ConfigError: a bad override.
     """
 
-    def __init__(self, pose, refiner=None, *, iterations: int | None = None, device: str | None = None, icp: bool = False,
-                 colour_verify: bool = False, reader=None, score_thresh: float = MIN_DETECTION_SCORE, seed: int = 0,
-                 max_batch: int = 64, overrides: dict | None = None):
+    def __init__(self, pose, refiner=None, *, iterations: int | None = None, device: str | None = None,
+                 icp: bool = False, colour_verify: bool = False, reader=None,
+                 score_thresh: float = MIN_DETECTION_SCORE, seed: int = 0, max_batch: int = 64,
+                 overrides: dict | None = None):
         from ..runs import pick_device
 
         dev = pick_device(device)  # auto / None: the GPU when present
@@ -156,11 +162,18 @@ class Estimator:
         self.classes = [tuple(c) for c in classes]
         self.class_index = {int(c[0]): k for k, c in enumerate(self.classes)}
         self.refiner, self.refiner_cfg = refiner, (refiner_cfg if refiner is not None else None)
-        self.iterations = (self.refiner_cfg.iterations if self.refiner_cfg else 0) if iterations is None else int(iterations)
+        default_iterations = self.refiner_cfg.iterations if self.refiner_cfg else 0
+        self.iterations = default_iterations if iterations is None else int(iterations)
         if self.iterations < 0:
             raise PoseError(f"iterations must be >= 0, got {self.iterations}")
         if self.iterations and self.refiner is None:
             raise PoseError(f"--iterations {self.iterations} needs a refiner run (--refiner)")
+        self.dense = getattr(cfg, "head", "paper") == "dense"
+        if self.dense and self.refiner is not None:
+            raise PoseError("the refiner works on the paper head's poses, not on a dense pose run (drop --refiner)")
+        # classes the network saw no training instance of (a count of -1: unknown, predicted as before)
+        seen = getattr(net, "seen", None)
+        self.unseen = {int(c[0]) for k, c in enumerate(self.classes) if seen is not None and float(seen[k]) == 0}
         self.icp, self.colour_verify, self.reader = icp, colour_verify, reader
         self._diameters: dict[int, float] = {}
         self.score_thresh, self.seed, self.max_batch = score_thresh, seed, max_batch
@@ -201,7 +214,8 @@ class Estimator:
             raise PoseError(f"scene {sample.scene_id} image {sample.im_id}: the learned stage needs rgb and depth")
         if detections is None:
             if any(g.mask is None for g in sample.instances):
-                raise PoseError(f"scene {sample.scene_id} image {sample.im_id}: no ground-truth masks; use predicted masks (--masks PRED_DIR)")
+                raise PoseError(f"scene {sample.scene_id} image {sample.im_id}: no ground-truth masks; "
+                                "use predicted masks (--masks PRED_DIR)")
             items = [(g.obj_id, 1.0, g.mask) for g in sample.instances]
         else:
             items = [(d.obj_id, d.score, d.mask) for d in detections if d.score >= self.score_thresh]
@@ -211,12 +225,19 @@ class Estimator:
         usable = []
         for k, (oid, score, mask) in enumerate(items):
             if oid not in self.class_index:
-                rows[k] = PoseEstimate.failed(sample.scene_id, sample.im_id, oid, f"object id {oid} is not a class of the pose run")
+                rows[k] = PoseEstimate.failed(sample.scene_id, sample.im_id, oid,
+                                              f"object id {oid} is not a class of the pose run")
+                continue
+            if oid in self.unseen:
+                rows[k] = PoseEstimate.failed(sample.scene_id, sample.im_id, oid,
+                                              f"object id {oid}: the pose run saw no training instance of it")
                 continue
             if mask is None or np.shape(mask) != sample.depth.shape:
-                rows[k] = PoseEstimate.failed(sample.scene_id, sample.im_id, oid, "mask missing or of another size than the image")
+                rows[k] = PoseEstimate.failed(sample.scene_id, sample.im_id, oid,
+                                              "mask missing or of another size than the image")
                 continue
-            inst = extract_instance(sample.rgb, sample.depth, sample.K, mask, oid, crop=self.cfg.crop, margin=self.cfg.crop_margin,
+            inst = extract_instance(sample.rgb, sample.depth, sample.K, mask, oid, crop=self.cfg.crop,
+                                    margin=self.cfg.crop_margin,
                                     num_points=self.cfg.num_points, min_points=self.cfg.min_points, rng=rng, index=k,
                                     score=score, keep_points=keep_points, depth_band=self._diameter(oid))
             if isinstance(inst, str):
@@ -227,8 +248,12 @@ class Estimator:
         for s in range(0, len(usable), step):
             chunk = usable[s:s + step]
             batch = collate_frames([Frame(None if self.cfg.crop else sample.rgb, chunk)], self.class_index)
-            R, t = run_networks(self.net, self.refiner, batch, self.iterations, self.device, amp=True)
-            for inst, Ri, ti in zip(chunk, R, t):
+            if self.dense:
+                R, t = self._dense_poses(batch, chunk, np.random.default_rng([self.seed, int(sample.scene_id),
+                                                                              int(sample.im_id), 1]))
+            else:
+                R, t = run_networks(self.net, self.refiner, batch, self.iterations, self.device, amp=True)
+            for inst, Ri, ti in zip(chunk, R, t, strict=True):
                 Ri = _orthonormalise(Ri)
                 Ri, ti = self._post(inst, Ri, ti)
                 rows[inst.index] = PoseEstimate(sample.scene_id, sample.im_id, inst.obj_id, inst.score, Ri, ti)
@@ -238,6 +263,26 @@ class Estimator:
             if r.reason:
                 log.info("scene %d image %d obj %d: %s", r.scene_id, r.im_id, r.obj_id, r.reason)
         return rows
+
+    def _dense_poses(self, batch: dict, insts, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Poses of a dense-head batch: per-point object coordinates and confidences from the network, then
+        :func:`~sixdpose.pose.dense.ransac_kabsch` of the coordinates onto each instance's sampled cloud.
+        Returns ``(R (N, 3, 3), t (N, 3))`` float64, ``X_CO`` in metres."""
+        from .dense import ransac_kabsch
+
+        dev = self.device
+        with torch.no_grad(), torch.autocast("cuda", dtype=torch.float16, enabled=dev.type == "cuda"):
+            out = self.net(batch["images"].to(dev), batch["img_index"].to(dev), batch["choose"].to(dev),
+                           batch["cloud"].to(dev), batch["obj_index"].to(dev))
+        coords = out["coords"].float().cpu().double().numpy()
+        conf = torch.sigmoid(out["conf_logit"].float()).cpu().double().numpy()
+        Rs, ts = [], []
+        for inst, y, c in zip(insts, coords, conf, strict=True):
+            R, t, _ = ransac_kabsch(y, inst.cloud, c, threshold=self.cfg.ransac_threshold,
+                                    iterations=self.cfg.ransac_iterations, rng=rng)
+            Rs.append(R)
+            ts.append(t)
+        return np.stack(Rs), np.stack(ts)
 
     def _diameter(self, obj_id: int) -> float:
         """The object's diameter in metres from the reader's model (0.0 without a reader): the depth band
@@ -263,10 +308,11 @@ class Estimator:
         return r.X_CO[:3, :3], r.X_CO[:3, 3]
 
 
-def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: int | None = None, icp: bool = False,
-                    colour_verify: bool = False, device: str | None = None, split: str = "test", limit: int = 0,
-                    score_thresh: float = MIN_DETECTION_SCORE, progress: bool = False, estimator: Estimator | None = None,
-                    indices=None, overrides: dict | None = None) -> tuple[list[PoseEstimate], Estimator]:
+def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: int | None = None,
+                    icp: bool = False, colour_verify: bool = False, device: str | None = None, split: str = "test",
+                    limit: int = 0, score_thresh: float = MIN_DETECTION_SCORE, progress: bool = False,
+                    estimator: Estimator | None = None, indices=None,
+                    overrides: dict | None = None) -> tuple[list[PoseEstimate], Estimator]:
     """Estimate poses on every image of a dataset (disk reads are not timed).
 
     Args:
@@ -278,13 +324,15 @@ def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: 
     Returns:
         ``(estimates, estimator)``.
     Raises:
-        PredictionError (a corrupt prediction file, named; masks of another dataset), CheckpointError, PoseError, DatasetError.
+        PredictionError (a corrupt prediction file, named; masks of another dataset), CheckpointError,
+        PoseError, DatasetError.
     """
     from ..datasets.readers import as_reader
 
     reader = as_reader(data, split=split)
-    est = estimator or Estimator(pose, refiner, iterations=iterations, device=device, icp=icp, colour_verify=colour_verify,
-                                 reader=reader, score_thresh=score_thresh, overrides=overrides)
+    est = estimator or Estimator(pose, refiner, iterations=iterations, device=device, icp=icp,
+                                 colour_verify=colour_verify, reader=reader, score_thresh=score_thresh,
+                                 overrides=overrides)
     if masks != "gt" and not Path(masks).is_dir():
         raise PoseError(f"{masks}: prediction directory not found (use --masks gt for ground-truth masks)")
     if masks != "gt":

@@ -12,7 +12,10 @@ Shapes (``w`` = width multiplier, ``c(x) = max(1, round(x * w))``; ``w = 1`` is 
   then 256->512->1024, averaged over points into a global feature repeated to every point:
   128 + 256 + 1024 = 1408 per point. Rotation and translation heads 1408->640->256->128 each,
   attention pooling (Linear(128, 1) score per point, softmax over points, weighted sum), then a
-  per-class linear output: rotation (quaternion 4 or 6D 6) and translation (3).
+  per-class linear output: rotation (quaternion 4 or 6D 6) and translation (3). The ``dense`` head
+  (the project's own, :mod:`sixdpose.pose.dense`) replaces both heads by one 1408->640->256->128 per-point
+  branch and a per-class 1x1 conv to 4 per point: object coordinates (offsets from the class's model-box
+  centre in units of ``OFFSET_SCALE``, the cloud centred and in the same units) and a confidence logit.
 * :class:`Refiner`: object-frame cloud (N, P, 3) (fed in units of ``OFFSET_SCALE`` = 5 cm, its
   translation output in the same units: a change of units from the authors' metres, so that the
   point features are not swamped by the biases of a from-scratch network) + detached embedding (N, emb_dim, P): geometry
@@ -32,7 +35,6 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from .geometry import quaternion_to_matrix, rotation_dim, rotation_from_output
-
 
 #: Length unit (metres) of the centred cloud and of the predicted offset in ``centroid_offset`` mode.
 OFFSET_SCALE = 0.05
@@ -89,8 +91,8 @@ class ResNet18(nn.Module):
     def __init__(self, width: float = 1.0, norm: str = "none"):
         super().__init__()
         c = [_ch(v, width) for v in (64, 128, 256, 512)]
-        self.stem = nn.Sequential(nn.Conv2d(3, c[0], 7, 2, 3, bias=norm == "none"), norm2d(norm, c[0]), nn.ReLU(inplace=True),
-                                  nn.MaxPool2d(3, 2, 1))
+        self.stem = nn.Sequential(nn.Conv2d(3, c[0], 7, 2, 3, bias=norm == "none"), norm2d(norm, c[0]),
+                                  nn.ReLU(inplace=True), nn.MaxPool2d(3, 2, 1))
         self.layer1 = nn.Sequential(BasicBlock(c[0], c[0], norm=norm), BasicBlock(c[0], c[0], norm=norm))
         self.layer2 = nn.Sequential(BasicBlock(c[0], c[1], 2, norm=norm), BasicBlock(c[1], c[1], norm=norm))
         self.layer3 = nn.Sequential(BasicBlock(c[1], c[2], 1, 2, norm), BasicBlock(c[2], c[2], 1, 2, norm))
@@ -114,7 +116,7 @@ class PSPModule(nn.Module):
     def forward(self, x):  # noqa: D102
         h, w = x.shape[-2:]
         pri = [F.interpolate(conv(F.adaptive_avg_pool2d(x, s)), size=(h, w), mode="bilinear", align_corners=False)
-               for s, conv in zip(self.sizes, self.stages)]
+               for s, conv in zip(self.sizes, self.stages, strict=True)]
         return F.relu(self.norm(self.bottleneck(torch.cat(pri + [x], 1))))
 
 
@@ -174,13 +176,15 @@ class PoseNet(nn.Module):
     Args:
         num_classes: object classes (the per-class outputs). width, emb_dim, norm: as in
             :class:`~sixdpose.pose.config.PoseConfig`. rotation: ``quaternion`` | ``6d``.
-            translation: ``absolute`` | ``centroid_offset``.
+            translation: ``absolute`` | ``centroid_offset``. head: ``paper`` (the rotation and translation
+            heads) or ``dense`` (per-point object coordinates and confidences, :mod:`sixdpose.pose.dense`;
+            ``rotation`` and ``translation`` are then unused).
     """
 
     def __init__(self, num_classes: int, width: float = 1.0, emb_dim: int = 32, norm: str = "none",
-                 rotation: str = "quaternion", translation: str = "absolute"):
+                 rotation: str = "quaternion", translation: str = "absolute", head: str = "paper"):
         super().__init__()
-        self.num_classes, self.rotation, self.translation = num_classes, rotation, translation
+        self.num_classes, self.rotation, self.translation, self.head = num_classes, rotation, translation, head
         self.cnn = PSPNet(width, emb_dim, norm)
         c = lambda x: _ch(x, width)  # noqa: E731
         self.conv1, self.conv2 = _conv1d(3, c(64), norm), _conv1d(c(64), c(128), norm)
@@ -188,18 +192,30 @@ class PoseNet(nn.Module):
         self.conv5, self.conv6 = _conv1d(2 * c(128), c(512), norm), _conv1d(c(512), c(1024), norm)
         self.fused_channels = 2 * c(64) + 2 * c(128) + c(1024)
 
-        def head():
+        def make_head():
             return nn.Sequential(_conv1d(self.fused_channels, c(640), norm), _conv1d(c(640), c(256), norm),
                                  _conv1d(c(256), c(128), norm))
 
-        self.head_r, self.head_t = head(), head()
-        self.att_r, self.att_t = AttentionPool(c(128)), AttentionPool(c(128))
-        self.out_r = nn.Linear(c(128), num_classes * rotation_dim(rotation))
-        self.out_t = nn.Linear(c(128), num_classes * 3)
+        if self.head == "dense":  # per point: object coordinates (3) and a confidence logit, per class
+            self.head_d = make_head()
+            self.out_d = nn.Conv1d(c(128), num_classes * 4, 1)
+        else:
+            self.head_r, self.head_t = make_head(), make_head()
+            self.att_r, self.att_t = AttentionPool(c(128)), AttentionPool(c(128))
+            self.out_r = nn.Linear(c(128), num_classes * rotation_dim(rotation))
+            self.out_t = nn.Linear(c(128), num_classes * 3)
         # (num_classes, 3) metres: each class's model-box centre in its object frame (set_centres); the
         # centroid_offset mode predicts where this centre is, so the translation does not hinge on the
         # rotation when a model's origin lies off its body (YCB origins are up to 12 cm off)
         self.register_buffer("centres", torch.zeros(num_classes, 3))
+        # (num_classes,) training instances seen per class (counted by the training task; -1: unknown, a
+        # network built outside training or a checkpoint from before the count): inference skips classes at 0
+        self.register_buffer("seen", torch.full((num_classes,), -1.0))
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
+        if prefix + "seen" not in state_dict:  # a checkpoint from before the count: unknown
+            state_dict[prefix + "seen"] = torch.full_like(self.seen, -1.0)
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     def set_centres(self, centres) -> None:
         """Set the per-class model-box centres, (num_classes, 3) metres in the object frames (saved in the state)."""
@@ -235,10 +251,13 @@ class PoseNet(nn.Module):
                 points, metres. obj_index: (N,) long class indices.
         Returns:
             dict: ``R`` (N, 3, 3), ``t`` (N, 3) metres (``X_CO``), ``emb`` (N, E, P) colour embeddings,
-            ``att_r``/``att_t`` (N, P) attention weights.
+            ``att_r``/``att_t`` (N, P) attention weights. The dense head instead: ``coords`` (N, P, 3)
+            object coordinates of the points (metres), ``conf_logit`` (N, P) and ``emb``.
         """
         emb = self.embed(images, img_index, choose)
         centroid = cloud.mean(dim=1)
+        if self.head == "dense":
+            return self._dense(cloud, centroid, emb, obj_index)
         # centroid_offset: the centred cloud in units of OFFSET_SCALE (spread ~1, not ~0.05 m, so the
         # geometry features are not swamped by the biases) and the offset predicted in the same units
         inp = (cloud - centroid[:, None, :]) / OFFSET_SCALE if self.translation == "centroid_offset" else cloud
@@ -255,6 +274,15 @@ class PoseNet(nn.Module):
         if self.translation == "centroid_offset":  # t_c = centroid + offset is the model-box centre
             t = centroid + OFFSET_SCALE * t - torch.einsum("nij,nj->ni", R, self.centres[obj_index].to(R.dtype))
         return {"R": R, "t": t, "emb": emb, "att_r": wr, "att_t": wt}
+
+    def _dense(self, cloud, centroid, emb, obj_index):
+        """The dense head: the centred cloud in units of OFFSET_SCALE, per-point object coordinates as
+        offsets (same units) from the class's model-box centre, and a confidence logit."""
+        f = self.fuse((cloud - centroid[:, None, :]) / OFFSET_SCALE, emb)
+        n, p = len(obj_index), cloud.shape[1]
+        o = self.out_d(self.head_d(f)).view(n, self.num_classes, 4, p)[torch.arange(n), obj_index]  # (N, 4, P)
+        coords = self.centres[obj_index].to(o.dtype)[:, None, :] + OFFSET_SCALE * o[:, :3].transpose(1, 2)
+        return {"coords": coords, "conf_logit": o[:, 3], "emb": emb}
 
 
 class Refiner(nn.Module):
@@ -292,7 +320,8 @@ class Refiner(nn.Module):
 
 def build_posenet(cfg, num_classes: int) -> PoseNet:
     """The :class:`PoseNet` of a :class:`~sixdpose.pose.config.PoseConfig`."""
-    return PoseNet(num_classes, cfg.width, cfg.emb_dim, cfg.norm, cfg.rotation, cfg.translation)
+    return PoseNet(num_classes, cfg.width, cfg.emb_dim, cfg.norm, cfg.rotation, cfg.translation,
+                   getattr(cfg, "head", "paper"))
 
 
 def build_refiner(cfg, num_classes: int, emb_dim: int) -> Refiner:

@@ -33,6 +33,7 @@ from ..training import train as _engine_train
 from . import checkpoint as ck
 from .config import PoseConfig, RefinerConfig, profile_config, refiner_profile_config
 from .data import FrameDataset, PoseError, collate_frames, collate_list, sample_model_points
+from .dense import coordinate_targets, dense_loss, model_symmetry
 from .geometry import compose_refinement, perturb_poses, to_object_frame
 from .loss import pose_loss
 from .model import build_posenet, build_refiner
@@ -48,7 +49,8 @@ def dataset_classes(reader) -> list[list]:
     return [[int(oid), str(name), bool(reader.model(oid).symmetric)] for oid, name in sorted(reader.object_ids.items())]
 
 
-def validate_accuracy(reader, posenet, cfg, classes, device, refiner=None, iterations: int = 0, limit: int = 0) -> float:
+def validate_accuracy(reader, posenet, cfg, classes, device, refiner=None, iterations: int = 0,
+                      limit: int = 0) -> float:
     """ADD(-S) accuracy (%) of the networks on a reader's GT-mask instances (the paper's 10 % criterion)."""
     from ..evaluation.evaluate import evaluate
     from .infer import Estimator
@@ -72,7 +74,10 @@ def validate_accuracy(reader, posenet, cfg, classes, device, refiner=None, itera
 class PoseTask(TrainTask):
     """The main pose network (``kind="pose"``) or the refiner on a finished main network (``"refiner"``)
     as a task of the training engine: frames of the reader's images, the ADD(-S)/chamfer loss of
-    :func:`~.loss.pose_loss` (metres), ``val_add`` on an optional validation set after every epoch."""
+    :func:`~.loss.pose_loss` (metres; the dense head: :func:`~.dense.dense_loss` on the object coordinates
+    of :func:`~.dense.coordinate_targets`), ``val_add`` on an optional validation set after every epoch.
+    The main network's ``seen`` buffer counts the training instances of every class (inference skips a
+    class it never saw)."""
 
     loss_fields = ()
     val_fields = ("val_add",)
@@ -104,9 +109,12 @@ class PoseTask(TrainTask):
         if self.kind == "refiner":
             from .infer import load_posenet
 
-            self.pose_ckpt = ck.load(self.pose_run, kind="pose")
+            pose_ckpt = self.pose_ckpt = ck.load(self.pose_run, kind="pose")
             # built here, before the engine seeds the refiner's initialisation
-            self.posenet, self.pose_cfg = load_posenet(self.pose_ckpt, "cpu")
+            self.posenet, self.pose_cfg = load_posenet(pose_ckpt, "cpu")
+            if self.pose_cfg.head != "paper":
+                raise PoseError(f"{pose_ckpt['path']}: the refiner works on the paper head's poses, not on a "
+                                f"{self.pose_cfg.head} pose run")
             for p in self.posenet.parameters():
                 p.requires_grad_(False)
         self.reader = reader
@@ -153,6 +161,9 @@ class PoseTask(TrainTask):
             for oid, pts in self.model_points.items():
                 centres[self.class_index[oid]] = (pts.min(0) + pts.max(0)) / 2.0
             net.set_centres(centres)
+            net.seen.zero_()  # counted from here (a resumed run's count comes with its weights)
+            self.symmetries = {oid: model_symmetry(reader.model(oid)) for oid in self.model_points} \
+                if cfg.head == "dense" else {}
         else:
             net = build_refiner(cfg, len(classes), int(pose_ckpt["arch"]["emb_dim"]))
         self.val_reader = as_reader(self.val, split="test") if self.val is not None else None
@@ -185,6 +196,16 @@ class PoseTask(TrainTask):
         R_gt, t_gt = batch["R"].to(dev), batch["t"].to(dev)
         cloud, obj = batch["cloud"].to(dev), batch["obj_index"].to(dev)
         images, img_index, choose = batch["images"].to(dev), batch["img_index"].to(dev), batch["choose"].to(dev)
+        if is_pose:
+            self._count(net, obj, ctx)
+        if is_pose and cfg.head == "dense":
+            tgs = [coordinate_targets(i.cloud, i.R, i.t, self.symmetries[i.obj_id]) for i in insts]
+            S = max(len(x) for x in tgs)
+            tg = np.stack([np.concatenate([x, np.repeat(x[:1], S - len(x), axis=0)]) for x in tgs])
+            with ctx.autocast():
+                out = net(images, img_index, choose, cloud, obj)
+            loss, _ = dense_loss(out["coords"].float(), out["conf_logit"].float(), torch.from_numpy(tg).to(dev))
+            return {"loss": loss.mean()}
         with ctx.autocast():
             if is_pose:
                 out = net(images, img_index, choose, cloud, obj)
@@ -201,6 +222,18 @@ class PoseTask(TrainTask):
                     R_r, t_r = net(to_object_frame(cloud, R, t), emb, obj)
                     R, t = compose_refinement(R, t, R_r.float(), t_r.float())
         return {"loss": pose_loss(R.float(), t.float(), R_gt, t_gt, mp, symm).mean()}
+
+    @staticmethod
+    def _count(net, obj, ctx: StepContext) -> None:
+        """Add the step's instances per class (over every rank) to the network's ``seen`` buffer."""
+        model = getattr(net, "module", net)
+        counts = torch.bincount(obj, minlength=model.num_classes).to(model.seen.dtype)
+        if ctx.world > 1:
+            import torch.distributed as dist
+
+            dist.all_reduce(counts)
+        with torch.no_grad():
+            model.seen.copy_(torch.where(model.seen >= 0, model.seen + counts, model.seen))
 
     def validate(self, model, epoch):
         """``val_add`` (%) on the validation set, if one was given."""

@@ -16,9 +16,10 @@ from .methods import (
 )
 from .presets import PRESETS, RegistrationConfig, get_preset
 from .runner import RegistrationError, run_registration
+from .super4pcs import kabsch_batch
 
 __all__ = [
     "METHODS", "PRESETS", "ReferenceCache", "Registration", "RegistrationConfig", "RegistrationError", "estimate_pose",
-    "get_preset", "prepare_scene", "refine_icp", "refine_pose", "register_fgr", "register_ransac", "register_super4pcs",
-    "run_registration",
+    "get_preset", "kabsch_batch", "prepare_scene", "refine_icp", "refine_pose", "register_fgr", "register_ransac",
+    "register_super4pcs", "run_registration",
 ]

@@ -1,0 +1,263 @@
+"""The dense head of the learned stage (the project's own method, beside the paper's network): per-point
+object coordinates, their training targets under object symmetries, the loss, and the robust pose fit.
+
+The network (:class:`~sixdpose.pose.model.PoseNet` with ``head="dense"``) predicts for every sampled
+point ``x_i`` of the masked cloud (camera frame, metres) its coordinates ``y_i`` in the model frame
+(metres) and a confidence ``c_i`` in (0, 1). The pose ``X_CO`` is then the rigid transform mapping the
+``y_i`` onto the ``x_i``: weighted Kabsch inside RANSAC (:func:`ransac_kabsch`).
+
+Targets (:func:`coordinate_targets`): ``y_i = R^T (x_i - t)`` under the ground-truth pose ``(R, t)``.
+Symmetric objects (:class:`Symmetry`) have several equivalent poses ``X_CO S`` (``S`` maps the model
+onto itself), hence several target sets:
+
+* discrete symmetries (BOP ``symmetries_discrete``, the identity included): one candidate target set
+  per symmetry; the loss takes the minimum over them (per instance);
+* a continuous symmetry (BOP ``symmetries_continuous``: rotations about ``axis`` through ``offset``):
+  the equivalent poses are canonicalised, i.e. the rotation about the axis is chosen so that the
+  camera centre, seen in the object frame, lies in the half-plane of a fixed reference direction
+  ``ref`` perpendicular to the axis. Every equivalent ground-truth pose gives the same targets, and
+  they are a function of what the image shows, so the network can learn them.
+
+Objects flagged symmetric without a BOP annotation (the synthetic layout only has a ``symmetric`` flag)
+get their symmetries from the model's shape (:func:`discover_symmetries`): rotations about its principal
+axes that map the model points onto themselves within 2 % of the diameter.
+
+Loss (DenseFusion, Wang et al. 2019): ``mean_i (d_i c_i - w log c_i)`` with ``d_i = ||y^_i - y_i||``
+(metres) and ``w = 0.015`` (:func:`dense_loss`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from ..registration import kabsch_batch
+
+#: Weight of the confidence regulariser of the loss (DenseFusion's ``w``).
+CONF_WEIGHT = 0.015
+#: Largest mean point distance (fraction of the diameter) of a rotation accepted as a shape symmetry.
+SYMMETRY_TOL = 0.02
+#: Angles (radians) tried about each principal axis by :func:`discover_symmetries`.
+_DISCRETE_ANGLES = tuple(k * math.pi / 6 for k in range(1, 12))
+
+
+@dataclass(frozen=True)
+class Symmetry:
+    """The symmetries of one object model (object frame, metres).
+
+    Attributes:
+        R: (S, 3, 3) and t: (S, 3): the discrete symmetries ``x -> R x + t``, the identity first.
+        axis: (3,) unit axis of the continuous symmetry, or None. offset: (3,) a point on the axis.
+        ref: (3,) unit reference direction perpendicular to ``axis`` (canonicalisation), or None.
+    """
+
+    R: np.ndarray
+    t: np.ndarray
+    axis: np.ndarray | None = None
+    offset: np.ndarray | None = None
+    ref: np.ndarray | None = None
+
+    @classmethod
+    def none(cls) -> Symmetry:
+        """No symmetry (the identity alone)."""
+        return cls(np.eye(3)[None], np.zeros((1, 3)))
+
+    @classmethod
+    def build(cls, discrete: list[tuple[np.ndarray, np.ndarray]], axis=None, offset=None) -> Symmetry:
+        """From a list of discrete ``(R, t)`` (the identity is prepended unless first) and an optional axis."""
+        mats = [(np.asarray(R, float), np.asarray(t, float)) for R, t in discrete]
+        if not mats or not (np.allclose(mats[0][0], np.eye(3)) and np.allclose(mats[0][1], 0)):
+            mats.insert(0, (np.eye(3), np.zeros(3)))
+        ref = None
+        if axis is not None:
+            axis = np.asarray(axis, float) / np.linalg.norm(axis)
+            e = np.eye(3)[int(np.argmin(np.abs(axis)))]
+            ref = e - (e @ axis) * axis
+            ref /= np.linalg.norm(ref)
+            offset = np.zeros(3) if offset is None else np.asarray(offset, float)
+        return cls(np.stack([m[0] for m in mats]), np.stack([m[1] for m in mats]), axis, offset, ref)
+
+    @property
+    def trivial(self) -> bool:
+        """Whether the object has no symmetry at all."""
+        return self.axis is None and len(self.R) == 1
+
+
+def rotation_about(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation matrix (3, 3) by ``angle`` radians about the unit ``axis`` (3,) (right-hand rule)."""
+    a = np.asarray(axis, float)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def discover_symmetries(points: np.ndarray, diameter: float, tol: float = SYMMETRY_TOL, max_points: int = 1500,
+                        seed: int = 0) -> Symmetry:
+    """Symmetries of a model found from its shape (for models flagged symmetric without annotations).
+
+    Rotations by multiples of 30 degrees about each principal axis through the centroid are kept when the
+    mean distance from the rotated points to the nearest model point is below ``tol * diameter`` (and
+    below twice the points' own spacing otherwise: sampling noise); an axis about which all 11 of them
+    pass is the continuous symmetry (the first such axis), the others are discrete ones.
+
+    Args:
+        points: (M, 3) model points, metres. diameter: metres. tol: fraction of the diameter.
+        max_points: subsample of the points used (deterministic, ``seed``).
+    Returns:
+        the :class:`Symmetry` (the identity alone when nothing passes).
+    """
+    from scipy.spatial import cKDTree
+
+    P = np.asarray(points, float)
+    if len(P) > max_points:
+        P = P[np.random.default_rng(seed).choice(len(P), max_points, replace=False)]
+    tree = cKDTree(P)
+    spacing = float(np.median(tree.query(P, k=2)[0][:, 1]))
+    limit = max(tol * diameter, 2.0 * spacing)
+    c = P.mean(axis=0)
+    _, vecs = np.linalg.eigh(np.cov((P - c).T))
+    axis: np.ndarray | None = None
+    discrete: list[np.ndarray] = []
+    for k in range(3):
+        a = vecs[:, k]
+        ok = []
+        for ang in _DISCRETE_ANGLES:
+            R = rotation_about(a, ang)
+            err = float(tree.query((P - c) @ R.T + c)[0].mean())
+            ok.append(err <= limit)
+        if all(ok) and axis is None:
+            axis = a
+            continue
+        discrete.extend((rotation_about(a, ang), c - rotation_about(a, ang) @ c)
+                        for ang, good in zip(_DISCRETE_ANGLES, ok, strict=True) if good)
+    return Symmetry.build(discrete, axis, c if axis is not None else None)
+
+
+def model_symmetry(model) -> Symmetry:
+    """The :class:`Symmetry` of an :class:`~sixdpose.datasets.base.ObjectModel`: its BOP annotation
+    (``symmetries_discrete``; the first ``symmetries_continuous`` entry) when it has one, else the
+    shape's symmetries when it is flagged ``symmetric``, else none."""
+    if model.symmetries:
+        from ..evaluation.metrics import symmetry_transformations
+
+        disc = symmetry_transformations({"symmetries_discrete": model.symmetries.get("symmetries_discrete") or []})
+        cont = model.symmetries.get("symmetries_continuous") or []
+        if cont:
+            return Symmetry.build(disc, cont[0]["axis"], np.asarray(cont[0].get("offset", [0, 0, 0]), float) / 1000.0)
+        return Symmetry.build(disc)
+    if model.symmetric:
+        return discover_symmetries(model.points, float(model.diameter))
+    return Symmetry.none()
+
+
+def coordinate_targets(cloud: np.ndarray, R: np.ndarray, t: np.ndarray, sym: Symmetry) -> np.ndarray:
+    """Candidate object coordinates of the points of one instance under its equivalent ground-truth poses.
+
+    For every discrete symmetry ``S_d = (R_d, t_d)`` the pose ``X_CO S_d`` is taken, canonicalised about
+    the continuous axis if there is one (see the module docstring), and the points are expressed in
+    its object frame.
+
+    Args:
+        cloud: (P, 3) camera-frame points, metres. R: (3, 3), t: (3,) ground-truth ``X_CO``.
+        sym: the object's :class:`Symmetry`.
+    Returns:
+        (S, P, 3) float32 object coordinates, metres, one set per discrete symmetry (S = 1 without).
+    """
+    R, t = np.asarray(R, float), np.asarray(t, float)
+    y = (np.asarray(cloud, float) - t) @ R  # R^T (x - t) for row vectors
+    out = []
+    for Rd, td in zip(sym.R, sym.t, strict=True):
+        # X S_d: p_C = R (R_d p + t_d) + t, so the coordinates are S_d^-1 y = R_d^T (y - t_d)
+        yd = (y - td) @ Rd
+        if sym.axis is not None and sym.ref is not None:
+            a, o = sym.axis, sym.offset
+            cam = (-t) @ R  # the camera centre in the frame of X
+            cam = (cam - td) @ Rd - o  # ... in the frame of X S_d, relative to the axis point
+            w = cam - (cam @ a) * a
+            phi = math.atan2(float(np.cross(sym.ref, w) @ a), float(sym.ref @ w)) if np.linalg.norm(w) > 1e-9 else 0.0
+            yd = (yd - o) @ rotation_about(a, -phi).T + o
+        out.append(yd)
+    return np.stack(out).astype(np.float32)
+
+
+def dense_loss(coords: torch.Tensor, conf_logit: torch.Tensor, targets: torch.Tensor,
+               w: float = CONF_WEIGHT) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per-instance dense loss ``mean_i (d_i c_i - w log c_i)``, minimised over the candidate target sets.
+
+    Args:
+        coords: (N, P, 3) predicted object coordinates, metres. conf_logit: (N, P) confidence logits
+            (``c = sigmoid``). targets: (N, S, P, 3) candidate targets (:func:`coordinate_targets`,
+            padded by repeating a set). w: confidence weight.
+    Returns:
+        ``(loss (N,), dist (N,))``: the loss and the mean point distance (metres) of the chosen set.
+    """
+    d = (coords[:, None] - targets).norm(dim=3)  # (N, S, P)
+    best = d.mean(dim=2).argmin(dim=1)
+    d = d[torch.arange(len(d), device=d.device), best]  # (N, P)
+    c = torch.sigmoid(conf_logit)
+    loss = (d * c - w * F.logsigmoid(conf_logit)).mean(dim=1)
+    return loss, d.mean(dim=1)
+
+
+def weighted_kabsch(src: np.ndarray, dst: np.ndarray,
+                    weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Rigid transform minimising ``sum_k w_k |R src_k + t - dst_k|^2`` (weighted Kabsch / Umeyama, no scale).
+
+    Args:
+        src: (K, 3). dst: (K, 3). weights: (K,) >= 0, not all zero (None: equal).
+    Returns:
+        R (3, 3) proper rotation, t (3,).
+    """
+    src, dst = np.asarray(src, float), np.asarray(dst, float)
+    w = np.ones(len(src)) if weights is None else np.asarray(weights, float)
+    w = w / w.sum()
+    cs, cd = w @ src, w @ dst
+    H = ((src - cs) * w[:, None]).T @ (dst - cd)
+    U, _, Vt = np.linalg.svd(H)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
+    R = Vt.T @ D @ U.T
+    return R, cd - R @ cs
+
+
+def ransac_kabsch(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None, *, threshold: float = 0.015,
+                  iterations: int = 128, rng: np.random.Generator | None = None,
+                  refits: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Robust rigid fit of correspondences ``src_k -> dst_k`` with outliers.
+
+    ``iterations`` hypotheses from 3 correspondences each (drawn with probability proportional to
+    ``weights``; batched Kabsch of the registration stage), scored by the summed weight of their inliers
+    (``|R src + t - dst| < threshold``); the best is refitted ``refits`` times by :func:`weighted_kabsch`
+    on its inliers.
+
+    Args:
+        src: (K, 3) e.g. predicted object coordinates, metres. dst: (K, 3) e.g. the camera-frame cloud.
+        weights: (K,) > 0 confidences (None: equal). threshold: inlier distance, metres.
+        iterations: hypotheses. rng: numpy generator (default seed 0). refits: refinement rounds.
+    Returns:
+        ``(R (3, 3), t (3,), inliers (K,) bool)`` with ``dst ~ R src + t``.
+    Raises:
+        ValueError: fewer than 3 correspondences.
+    """
+    src, dst = np.asarray(src, float), np.asarray(dst, float)
+    K = len(src)
+    if K < 3:
+        raise ValueError(f"a rigid fit needs >= 3 correspondences, got {K}")
+    rng = rng or np.random.default_rng(0)
+    w = np.ones(K) if weights is None else np.clip(np.asarray(weights, float), 1e-12, None)
+    p = w / w.sum()
+    idx = rng.choice(K, size=(iterations, 3), p=p)  # a triplet with a repeated point scores low: no need to redraw
+    Rs, ts = kabsch_batch(src[idx], dst[idx])
+    res = np.linalg.norm(src @ Rs.transpose(0, 2, 1) + ts[:, None] - dst[None], axis=2)  # (M, K)
+    score = ((res < threshold) * w[None]).sum(axis=1)
+    best = int(np.argmax(score))
+    R, t = Rs[best], ts[best]
+    inl = res[best] < threshold
+    for _ in range(refits):
+        if inl.sum() < 3:
+            break
+        R, t = weighted_kabsch(src[inl], dst[inl], w[inl])
+        inl = np.linalg.norm(src @ R.T + t - dst, axis=1) < threshold
+    return R, t, inl

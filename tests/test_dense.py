@@ -1,0 +1,248 @@
+"""Tests of the dense head of the learned stage (sixdpose.pose.dense, PoseNet(head="dense")): the robust
+fit, the symmetric targets, training through the engine (resume, predict-pose) and classes without
+training instances. Fast: tiny networks on the 160x120 rendered dataset of test_pose."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from scipy.spatial.transform import Rotation
+
+sys.path.insert(0, str(Path(__file__).parent))
+from sixdpose.cli import main  # noqa: E402
+from sixdpose.pose import checkpoint as ck  # noqa: E402
+from sixdpose.pose.dense import (  # noqa: E402
+    Symmetry,
+    coordinate_targets,
+    dense_loss,
+    discover_symmetries,
+    ransac_kabsch,
+    rotation_about,
+    weighted_kabsch,
+)
+from test_pose import OID, write_pose_dataset  # noqa: E402
+from test_reg_helpers import H_SMALL, K_SMALL, W_SMALL, make_shape, render_depth  # noqa: E402
+
+torch.set_num_threads(1)
+DENSE = dict(head="dense", epochs=2, repeat=1, batch_size=2, max_images=3)
+
+
+def _angle_deg(Ra, Rb) -> float:
+    return math.degrees(math.acos(np.clip((np.trace(Ra @ Rb.T) - 1) / 2, -1, 1)))
+
+
+# ---------------------------------------------------------------- robust fit
+def test_weighted_kabsch_exact_and_ransac_recovers_pose_with_outliers():
+    rng = np.random.default_rng(3)
+    R = Rotation.random(random_state=4).as_matrix()
+    t = np.array([0.1, -0.05, 0.7])
+    src = rng.uniform(-0.06, 0.06, size=(256, 3))
+    dst = src @ R.T + t
+    R1, t1 = weighted_kabsch(src, dst, rng.uniform(0.1, 1, 256))
+    assert np.allclose(R1, R) and np.allclose(t1, t)
+    noisy = dst + rng.normal(0, 0.002, size=dst.shape)
+    out = rng.random(256) < 0.4  # 40 % gross outliers
+    noisy[out] = t + rng.uniform(-0.15, 0.15, size=(out.sum(), 3))
+    Rp, tp = weighted_kabsch(src, noisy)  # plain least squares is dragged away by the outliers
+    assert _angle_deg(Rp, R) > 2.0 or np.linalg.norm(tp - t) > 0.005
+    Rr, tr, inl = ransac_kabsch(src, noisy, threshold=0.008, rng=np.random.default_rng(0))
+    assert _angle_deg(Rr, R) < 1.0 and np.linalg.norm(tr - t) < 0.002
+    assert inl[~out].mean() > 0.9 and inl[out].mean() < 0.1
+    with pytest.raises(ValueError, match=">= 3"):
+        ransac_kabsch(src[:2], dst[:2])
+
+
+# ---------------------------------------------------------------- symmetric targets
+def _instance(rng):
+    R = Rotation.random(random_state=int(rng.integers(1 << 30))).as_matrix()
+    t = np.array([0.05, 0.02, 0.6])
+    pts_O = rng.uniform(-0.04, 0.04, size=(64, 3))
+    return R, t, pts_O @ R.T + t
+
+
+def _loss_dist(pred, targets):
+    coords = torch.from_numpy(pred[None]).float()
+    _, d = dense_loss(coords, torch.zeros(1, coords.shape[1]), torch.from_numpy(targets[None]).float())
+    return float(d[0])
+
+
+def test_continuous_and_discrete_symmetric_poses_give_zero_loss():
+    rng = np.random.default_rng(0)
+    axis, offset = np.array([0.0, 0.0, 1.0]), np.array([0.01, -0.02, 0.03])
+
+    def about_axis(th):  # rotation by th about the axis through offset
+        Rc = rotation_about(axis, th)
+        return Rc, offset - Rc @ offset
+
+    Rx = rotation_about(np.array([1.0, 0, 0]), math.pi)
+    S_flip = (Rx, offset - Rx @ offset)  # a half turn about the x line through offset (maps the axis onto itself)
+    cases = {
+        "continuous": (Symmetry.build([], axis, offset), about_axis),
+        "discrete": (Symmetry.build([S_flip]), lambda th: S_flip),
+        "both": (Symmetry.build([S_flip], axis, offset), None),
+    }
+    for name, (sym, make_S) in cases.items():
+        R, t, cloud = _instance(rng)
+        pred = coordinate_targets(cloud, R, t, sym)[0]  # a perfect prediction for the pose X
+        for th in rng.uniform(0, 2 * math.pi, 4):
+            if make_S is None:  # X S_c S_d: a continuous rotation and the flip
+                Rc = rotation_about(axis, th)
+                Rs, ts = Rc @ S_flip[0], Rc @ S_flip[1] + offset - Rc @ offset
+            else:
+                Rs, ts = make_S(th)
+            R2, t2 = R @ Rs, R @ ts + t  # X S: the same object in the same place
+            d = _loss_dist(pred, coordinate_targets(cloud, R2, t2, sym))
+            assert d < 1e-5, (name, th, d)
+            # without the symmetry the same prediction is wrong for the equivalent pose
+            assert _loss_dist(pred, coordinate_targets(cloud, R2, t2, Symmetry.none())) > 1e-3, name
+    # the targets fit back to a pose that is symmetric-equivalent to the ground truth
+    sym = cases["continuous"][0]
+    R, t, cloud = _instance(rng)
+    y = coordinate_targets(cloud, R, t, sym)[0]
+    Rf, tf = weighted_kabsch(y, cloud)
+    model = rng.uniform(-0.04, 0.04, size=(50, 3))
+    ring = [about_axis(a) for a in np.linspace(0, 2 * math.pi, 721)]
+    err = min(np.abs((model @ (Rf @ Rs).T + Rf @ ts + tf) - (model @ R.T + t)).max() for Rs, ts in ring)
+    assert err < 1e-3
+
+
+def test_discover_symmetries_of_shapes():
+    rng = np.random.default_rng(1)
+    # a closed cylinder along y (radius 3 cm, height 10 cm): continuous about y, flips about x and z
+    n = 4000
+    ang, h = rng.uniform(0, 2 * math.pi, n), rng.uniform(-0.05, 0.05, n)
+    side = np.stack([0.03 * np.cos(ang), h, 0.03 * np.sin(ang)], 1)
+    r = 0.03 * np.sqrt(rng.uniform(0, 1, n // 2))
+    a2 = rng.uniform(0, 2 * math.pi, n // 2)
+    caps = np.stack([r * np.cos(a2), np.where(rng.random(n // 2) < 0.5, -0.05, 0.05), r * np.sin(a2)], 1)
+    cyl = np.concatenate([side, caps]) + [0.01, 0.02, 0.0]
+    s = discover_symmetries(cyl, 0.117)
+    assert s.axis is not None and abs(abs(s.axis[1]) - 1) < 1e-2
+    assert np.allclose(s.offset, [0.01, 0.02, 0.0], atol=2e-3) and len(s.R) >= 2
+    # a 10 x 6 x 2 cm box: 180-degree turns about its three axes, no continuous axis
+    box = rng.uniform(-1, 1, size=(6000, 3))
+    face = rng.integers(0, 3, 6000)
+    box[np.arange(6000), face] = np.sign(box[np.arange(6000), face])  # on the surface
+    box *= [0.05, 0.03, 0.01]
+    s = discover_symmetries(box, 0.12)
+    assert s.axis is None and len(s.R) == 4
+    # the asymmetric test shape: nothing
+    P, _, _, diam = make_shape(0.003, 0)
+    assert discover_symmetries(P, diam).trivial
+
+
+def test_model_symmetry_reads_bop_annotations():
+    from sixdpose.datasets.base import ObjectModel
+    from sixdpose.pose.dense import model_symmetry
+
+    P, N, C, diam = make_shape(0.004, 0)
+    flip = [1, 0, 0, 20.0, 0, -1, 0, 0, 0, 0, -1, 0, 0, 0, 0, 1]  # row-major: half turn about x, 20 mm along x
+    ann = {"symmetries_discrete": [flip], "symmetries_continuous": [{"axis": [0, 0, 2], "offset": [5, 0, 0]}]}
+    s = model_symmetry(ObjectModel("o", 1, P, N, C, diam, True, symmetries=ann))
+    assert np.allclose(s.axis, [0, 0, 1]) and np.allclose(s.offset, [0.005, 0, 0]) and abs(s.ref @ s.axis) < 1e-12
+    assert len(s.R) == 2 and np.allclose(s.R[1], np.diag([1, -1, -1])) and np.allclose(s.t[1], [0.02, 0, 0])
+    assert model_symmetry(ObjectModel("o", 1, P, N, C, diam, False)).trivial
+
+
+# ---------------------------------------------------------------- training, resume, inference
+@pytest.fixture(scope="module")
+def pose_ds(tmp_path_factory) -> Path:
+    return write_pose_dataset(tmp_path_factory.mktemp("dense") / "ds")
+
+
+def test_dense_training_resumes_bit_for_bit_and_predict_pose_writes_csv(pose_ds, tmp_path):
+    from sixdpose.artifacts.poses import read_results
+    from sixdpose.pose.train import train_pose
+
+    s = train_pose(pose_ds, tmp_path / "a", profile="smoke", progress=False, **DENSE)
+    assert s["epochs"] == 2 and np.isfinite(s["last_loss"])
+    train_pose(pose_ds, tmp_path / "b", profile="smoke", progress=False, **dict(DENSE, epochs=1))
+    s = train_pose(pose_ds, tmp_path / "b", resume=True, progress=False, epochs=2)
+    assert s["start_epoch"] == 1 and s["epochs"] == 2
+    a, b = ck.load(tmp_path / "a" / ck.LAST), ck.load(tmp_path / "b" / ck.LAST)
+    assert a["arch"]["head"] == "dense" and a["global_step"] == b["global_step"]
+    assert {k for k in a["model"] if k.startswith("head_")} == {k for k in a["model"] if k.startswith("head_d.")}
+    for k in a["model"]:
+        assert torch.equal(a["model"][k], b["model"][k]), k
+    assert float(a["model"]["seen"][0]) == 2 * 4  # 2 epochs x 3 images, the first with two instances
+    out = tmp_path / "res.csv"
+    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(tmp_path / "a"), "--out", str(out),
+                 "--no-progress"]) == 0
+    rows = read_results(out)
+    assert len(rows) == 4 and all(r.score > 0 for r in rows)
+    for r in rows:
+        assert np.allclose(r.R @ r.R.T, np.eye(3), atol=1e-6) and np.linalg.det(r.R) > 0
+        assert np.isfinite(r.t).all() and 0.3 < r.t[2] < 0.9  # the robust fit puts it on the cloud
+
+
+def test_dense_head_learns_coordinates(pose_ds, tmp_path):
+    """240 smoke steps (about 5 s) on the 3 images: the loss halves and most poses pass ADD at 10 %."""
+    from sixdpose.evaluation.evaluate import evaluate
+    from sixdpose.pose.infer import predict_dataset
+    from sixdpose.pose.train import train_pose
+
+    s = train_pose(pose_ds, tmp_path / "r", profile="smoke", progress=False, head="dense", epochs=60)
+    assert s["last_loss"] < 0.6 * s["first_loss"], s
+    rows, _ = predict_dataset(pose_ds, tmp_path / "r", device="cpu")
+    assert evaluate(pose_ds, rows, min_px=0).accuracy >= 50.0
+
+
+def test_refiner_refuses_a_dense_run(pose_ds, tmp_path, capsys):
+    from sixdpose.pose.train import train_pose
+
+    train_pose(pose_ds, tmp_path / "d", profile="smoke", progress=False, **dict(DENSE, epochs=1))
+    assert main(["train-refiner", "--pose", str(tmp_path / "d"), "--data", str(pose_ds), "--out",
+                 str(tmp_path / "ref"), "--profile", "smoke"]) == 2
+    assert "paper head" in capsys.readouterr().err
+
+
+def _two_object_dataset(root: Path) -> Path:
+    """Object OID in every image; object OID + 1 (another shape) only in the last image."""
+    from sixdpose.datasets.layout import write_dataset
+
+    P, N, C, diam = make_shape(0.002, 0)
+    Pd, Nd, _, _ = make_shape(0.0012, 0)
+    Q, M, D, diam2 = make_shape(0.002, 5)
+    Qd, Md, _, _ = make_shape(0.0012, 5)
+    rng = np.random.default_rng(0)
+    images = []
+    for im in range(4):
+        objs = [(OID, Pd, Nd, (-0.08, 0.0, 0.6))] + ([(OID + 1, Qd, Md, (0.08, 0.0, 0.6))] if im == 3 else [])
+        posed = [(oid, p, n, Rotation.from_rotvec(rng.normal(size=3) * 0.3).as_matrix(), np.asarray(t))
+                 for oid, p, n, t in objs]
+        depth, label = render_depth([(p, n, R, t) for _, p, n, R, t in posed])
+        rgb = np.zeros((H_SMALL, W_SMALL, 3), np.uint8)
+        rgb[label >= 0] = (200, 120, 40)
+        insts = [{"obj_name": "035_power_drill" if oid == OID else "055_baseball", "obj_id": oid, "inst": 0, "R": R,
+                  "t": t, "mask": label == k} for k, (oid, _, _, R, t) in enumerate(posed)]
+        images.append({"im_id": im, "scene_id": 0, "K": K_SMALL, "rgb": rgb, "depth": depth, "instances": insts})
+    models = {"035_power_drill": {"obj_id": OID, "diameter": diam, "symmetric": False, "points": P, "normals": N,
+                                  "colors": C},
+              "055_baseball": {"obj_id": OID + 1, "diameter": diam2, "symmetric": False, "points": Q, "normals": M,
+                        "colors": D}}
+    return write_dataset(root, images, models, {"generator": "tests.test_dense"})
+
+
+@pytest.mark.parametrize("head", ["dense", "paper"])
+def test_class_without_training_instances_is_skipped_with_reason(tmp_path, head):
+    from sixdpose.datasets import as_reader
+    from sixdpose.pose.infer import predict_dataset
+    from sixdpose.pose.train import train_pose
+
+    ds = _two_object_dataset(tmp_path / "ds")
+    reader = as_reader(ds)
+    assert reader.keys()[-1] == (0, 3)
+    s = train_pose(ds, tmp_path / "run", profile="smoke", progress=False, head=head, epochs=1, repeat=1, max_images=3,
+                   batch_size=3, val=ds)
+    assert s["val_add"] is not None  # validated through the estimator over the networks in memory
+    seen = ck.load(tmp_path / "run")["model"]["seen"].tolist()
+    assert seen == [3.0, 0.0]  # the last image (the only one with OID + 1) was not trained on
+    rows, _ = predict_dataset(ds, tmp_path / "run", device="cpu")
+    other = [r for r in rows if r.obj_id == OID + 1]
+    assert len(other) == 1 and other[0].score == 0 and "no training instance" in other[0].reason
+    assert all(r.score > 0 for r in rows if r.obj_id == OID)
