@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import os
+import re
 from pathlib import Path
 
 from .errors import OutputError
@@ -25,8 +27,25 @@ from .errors import OutputError
 MARKER = ".sixdpose.json"
 
 
+#: Names of the temporary files of :func:`atomic_path` (``.NAME.tmpPID``, see :func:`_tmp_path`; a suffix
+#: some writers append is allowed).
+_TMP = re.compile(r"^\..+\.tmp\d+(\.[^.]+)?$")
+
+
 def _tmp_path(path: Path) -> Path:
     return path.with_name(f".{path.name}.tmp{os.getpid()}")
+
+
+def remove_stale_temporaries(directory: Path) -> list[Path]:
+    """Delete the temporary files of :func:`atomic_path` that a killed process left in ``directory``
+    (one warning line naming them); returns them."""
+    stale = [p for p in sorted(Path(directory).iterdir()) if p.is_file() and _TMP.match(p.name)]
+    for p in stale:
+        p.unlink()
+    if stale:
+        logging.getLogger("sixdpose").warning("%s: removed %d stale temporary file(s) of an interrupted save (%s)",
+                                              directory, len(stale), ", ".join(p.name for p in stale))
+    return stale
 
 
 @contextlib.contextmanager

@@ -52,7 +52,6 @@ class Int:
 
     lo: int | None = None
     hi: int | None = None
-    kind = "int"
 
     def describe(self) -> str:
         """What is allowed, e.g. ``an integer in [1, 10000]``."""
@@ -77,7 +76,6 @@ class Float:
     hi: float | None = None
     lo_open: bool = False
     hi_open: bool = False
-    kind = "float"
 
     def describe(self) -> str:
         """What is allowed, e.g. ``a finite number in (0, 1]``."""
@@ -104,7 +102,6 @@ class Name:
     no separator, not ``.``/``..``, not absolute (:func:`sixdpose.fileio.check_path_name`)."""
 
     allow_empty: bool = False
-    kind = "name"
 
     def describe(self) -> str:
         """What is allowed."""
@@ -130,7 +127,6 @@ class Device:
     """argparse type: ``auto``, ``cpu``, ``cuda`` or ``cuda:N``, checked against this machine (CUDA
     present, ``N`` below the device count)."""
 
-    kind = "device"
 
     def describe(self) -> str:
         """What is allowed."""
@@ -326,10 +322,3 @@ def add_profile(parser: argparse.ArgumentParser, profiles, help: str) -> argpars
     its default is the command's entry in :data:`PER_COMMAND` (None: chosen by the command, e.g. the
     run's own on ``--resume``)."""
     return add(parser, "--profile", choices=tuple(profiles), help=help)
-
-
-def add_set(parser: argparse.ArgumentParser) -> None:
-    """The shared ``--set KEY=VALUE`` option (typed by the command's config dataclass)."""
-    from .config import add_set_option
-
-    add_set_option(parser)

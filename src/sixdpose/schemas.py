@@ -288,6 +288,7 @@ def check(schema, data, path: str | Path, error: type[SixdposeError], where: str
 def safe_name(name: str, what: str, error: type[SixdposeError] = SixdposeError) -> str:
     """``name`` if it can be used as one path component (no separator, not ``.``/``..``, not empty,
     not absolute); else ``error`` naming ``what`` (e.g. ``"--split"``)."""
-    if not isinstance(name, str) or not name or name in (".", "..") or "/" in name or "\\" in name or "\x00" in name:
-        raise error(f"{what}: {name!r} must be a plain name (no path separator, not '.' or '..', not empty)")
-    return name
+    try:
+        return _plain_name(name if isinstance(name, str) else "")
+    except ValueError as e:
+        raise error(f"{what}: {name!r} {e}") from None

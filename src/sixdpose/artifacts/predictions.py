@@ -176,7 +176,7 @@ def read_coco_results(pred_dir: str | Path) -> list[dict] | None:
     return data
 
 
-def check_predictions_dataset(pred_dir: str | Path, reader) -> None:
+def check_predictions_dataset(pred_dir: str | Path, reader, meta: dict | None = None) -> None:
     """Refuse predicted masks made on another dataset (or split) than ``reader``'s.
 
     ``sixdpose segment`` records the fingerprint of the dataset split it segmented
@@ -184,6 +184,8 @@ def check_predictions_dataset(pred_dir: str | Path, reader) -> None:
     predict-pose, train-pose, eval-seg) calls this before using the masks. A directory without
     ``meta.json``, or with one written before fingerprints were recorded, is accepted with a warning;
     a reader that has no fingerprint (not a BOP or synthetic reader) is not checked.
+
+    ``meta``: the directory's ``meta.json`` when the caller has read it already (else it is read here).
 
     Raises:
         PredictionError: the fingerprints differ (the message names both datasets), or ``meta.json`` is
@@ -194,7 +196,8 @@ def check_predictions_dataset(pred_dir: str | Path, reader) -> None:
     fp = dataset_fingerprint(reader)
     if fp is None:
         return
-    meta = read_predictions_meta(pred_dir)
+    if meta is None:
+        meta = read_predictions_meta(pred_dir)
     made_on = meta.get("data", "an unknown dataset")
     if not meta:
         log.warning("%s: no meta.json; cannot check that these masks were predicted on %s", pred_dir, reader.location)

@@ -167,31 +167,19 @@ def collate_samples(batch: list[Sample]) -> list[Sample]:
     return list(batch)
 
 
-def read_image(path: str | Path) -> np.ndarray:
-    """Read an image file (PNG, JPEG, 16-bit PNG) into a numpy array.
+def read_image(path: str | Path, modes: tuple[str, ...] | None = None, expected: str = "") -> np.ndarray:
+    """Read an image file (PNG, JPEG, 16-bit PNG) into a numpy array; with ``modes``, its PIL mode must be
+    one of them.
 
     Raises:
-        DatasetError: naming the file, if it is missing or not a readable image.
+        DatasetError: naming the file, if it is missing or not a readable image, or (with ``modes``) naming
+            its mode and ``expected``.
     """
     from PIL import Image
 
     try:
         with Image.open(path) as im:
-            return np.asarray(im).copy()
-    except FileNotFoundError:
-        raise DatasetError(f"{path}: file not found") from None
-    except Exception as e:  # PIL raises several types for truncated / non-image files
-        raise DatasetError(f"{path}: unreadable image ({e})") from None
-
-
-def _read_checked(path: str | Path, modes: tuple[str, ...], expected: str) -> np.ndarray:
-    """Read an image whose PIL mode must be one of ``modes``; else a :class:`DatasetError` naming the
-    file, its mode and ``expected``."""
-    from PIL import Image
-
-    try:
-        with Image.open(path) as im:
-            if im.mode not in modes:
+            if modes is not None and im.mode not in modes:
                 raise DatasetError(f"{path}: expected {expected}, got an image of mode {im.mode} "
                                    f"({len(im.getbands())} channel(s))")
             return np.asarray(im).copy()
@@ -210,7 +198,7 @@ def read_rgb(path: str | Path, grey: bool = True) -> np.ndarray:
     Raises:
         DatasetError: missing, unreadable, or not 8-bit RGB/RGBA(/grey) (e.g. a 16-bit or palette image).
     """
-    a = _read_checked(path, ("RGB", "RGBA", "L") if grey else ("RGB", "RGBA"), "an 8-bit RGB image")
+    a = read_image(path, ("RGB", "RGBA", "L") if grey else ("RGB", "RGBA"), "an 8-bit RGB image")
     if a.ndim == 2:
         a = np.repeat(a[..., None], 3, axis=2)
     return np.ascontiguousarray(a[..., :3])
@@ -223,7 +211,7 @@ def read_depth_png16(path: str | Path) -> np.ndarray:
         DatasetError: missing, unreadable, or not 16-bit single-channel (an 8-bit or colour image
             would be read at the wrong scale, so it is refused).
     """
-    a = _read_checked(path, ("I;16", "I;16B", "I;16L"), "a 16-bit single-channel depth image")
+    a = read_image(path, ("I;16", "I;16B", "I;16L"), "a 16-bit single-channel depth image")
     if a.ndim != 2:
         raise DatasetError(f"{path}: expected a 16-bit single-channel depth image, got shape {a.shape}")
     return a.astype(np.uint16, copy=False)
@@ -235,7 +223,7 @@ def read_mask(path: str | Path) -> np.ndarray:
     Raises:
         DatasetError: missing, unreadable, or not an 8-bit/1-bit single-channel image.
     """
-    a = _read_checked(path, ("L", "1"), "an 8-bit single-channel mask")
+    a = read_image(path, ("L", "1"), "an 8-bit single-channel mask")
     return a > 0
 
 

@@ -59,18 +59,6 @@ class FrameSchedule(TrainSchedule):
     max_images: int = bounded(0, min=0, max=100_000_000)
     repeat: int = bounded(1, min=1, max=10_000)
 
-    def validate(self) -> None:
-        """Check the schedule and frame fields (ValueError naming the field)."""
-        super().validate()
-        if not self.width > 0:
-            raise ValueError(f"width must be > 0, got {self.width}")
-        if self.num_points < 1 or self.num_model_points < 1 or self.min_points < 1:
-            raise ValueError("num_points, num_model_points and min_points must be >= 1")
-        if self.repeat < 1:
-            raise ValueError(f"repeat must be >= 1, got {self.repeat}")
-        if self.max_images < 0:
-            raise ValueError(f"max_images must be >= 0 (0: all), got {self.max_images}")
-
 
 @dataclass(frozen=True)
 class PoseConfig(FrameSchedule):

@@ -39,8 +39,7 @@ from .loss import pose_loss
 from .model import build_posenet, build_refiner
 
 log = logging.getLogger("sixdpose.pose")
-CSV_FIELDS = ("epoch", "step", "lr", "loss", "val_add", "seconds")
-__all__ = ["CSV_FIELDS", "PoseTask", "TrainingError", "dataset_classes", "ensure_trained", "learning_rate",
+__all__ = ["PoseTask", "TrainingError", "dataset_classes", "ensure_trained", "learning_rate",
            "read_metrics", "train_pose", "train_refiner", "validate_accuracy"]
 
 

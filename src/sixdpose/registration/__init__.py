@@ -2,6 +2,7 @@
 (RANSAC or FGR on FPFH features, or Super4PCS) -> optional ICP -> optional colour verification.
 See :mod:`.methods` (per instance) and :mod:`.runner` (over a dataset)."""
 
+from ..lazy import by_module, lazy_getattr
 from .geometry import ReferenceCache
 from .methods import (
     METHODS,
@@ -16,10 +17,12 @@ from .methods import (
 )
 from .presets import PRESETS, RegistrationConfig, get_preset
 from .runner import RegistrationError, run_registration
-from .super4pcs import kabsch_batch
 
 __all__ = [
     "METHODS", "PRESETS", "ReferenceCache", "Registration", "RegistrationConfig", "RegistrationError", "estimate_pose",
     "get_preset", "kabsch_batch", "prepare_scene", "refine_icp", "refine_pose", "register_fgr", "register_ransac",
     "register_super4pcs", "run_registration",
 ]
+
+# lazy: super4pcs imports scipy.spatial, which building the CLI parser need not load
+__getattr__ = lazy_getattr(__name__, by_module(super4pcs=("kabsch_batch",)))

@@ -27,7 +27,7 @@ from ..artifacts.tables import tex_escape, write_table
 from ..constants import ADD_THRESHOLD, MIN_VISIBLE_PX
 from ..errors import SixdposeError
 from ..fileio import atomic_write_text
-from ..registry import METHOD, METHODS, REAL_METHODS, Method
+from ..registry import HYBRID_ALGORITHMS, METHOD, METHODS, REAL_METHODS, Method
 from .paper import TABLES
 
 
@@ -582,7 +582,7 @@ def findings(entries: dict) -> dict[str, str]:
     out["masks"] = mean_sentence([(("single", "gt", k), ("single", "pred", k)) for k in keys],
                                  "with predicted masks", "with GT masks (single-instance subset)", "GT/predicted-mask")
     out["icp"] = mean_sentence(
-        [(("test", "gt", k), ("test", "gt", k + "_icp")) for k in ("ransac", "fgr", "super4pcs")],
+        [(("test", "gt", k), ("test", "gt", k + "_icp")) for k in HYBRID_ALGORITHMS],
         "with ICP",
         "without (hybrid methods, multi-instance split, GT masks)",
         "ICP",

@@ -190,7 +190,7 @@ def open_segmented(data: str | Path, pred_dir: str | Path):
         raise DatasetError(f"{meta_path}: not a prediction directory of `sixdpose segment` (no meta.json)")
     meta = read_predictions_meta(pred_dir, required=("classes", "images"))
     ds = open_dataset(data, split=meta.get("split") or "test")
-    check_predictions_dataset(pred_dir, ds)
+    check_predictions_dataset(pred_dir, ds, meta)
     index = {tuple(map(int, k)): i for i, k in enumerate(ds.keys())}
     return ds, meta, index
 

@@ -38,8 +38,7 @@ from .model import build_model, set_train_sizes
 log = logging.getLogger("sixdpose.segmentation")
 
 LOSS_KEYS = ("loss_classifier", "loss_box_reg", "loss_mask", "loss_objectness", "loss_rpn_box_reg")
-CSV_FIELDS = ("epoch", "step", "lr", "loss") + LOSS_KEYS + ("seconds",)
-__all__ = ["CSV_FIELDS", "LOSS_KEYS", "SegTask", "TrainingError", "ensure_trained", "read_metrics", "train"]
+__all__ = ["LOSS_KEYS", "SegTask", "TrainingError", "ensure_trained", "read_metrics", "train"]
 
 
 class SegTask(TrainTask):

@@ -48,7 +48,7 @@ import numpy as np
 import torch
 import torch.distributed as dist
 
-from ..fileio import atomic_write_json, claim_output_dir
+from ..fileio import atomic_write_json, claim_output_dir, remove_stale_temporaries
 from ..runs import (
     FINAL,
     LAST,
@@ -64,7 +64,6 @@ from .rundir import (
     TrainingError,
     check_same_data,
     prepare_run_dir,
-    remove_stale_temporaries,
     repair_metrics,
     write_status,
 )

@@ -16,7 +16,6 @@ import csv
 import hashlib
 import json
 import logging
-import re
 from pathlib import Path
 
 from ..errors import SixdposeError
@@ -28,8 +27,6 @@ log = logging.getLogger("sixdpose.training")
 
 STATUS = "status.json"
 METRICS = "metrics.csv"
-#: Temporary files of :func:`sixdpose.fileio.atomic_path` (``.NAME.tmpPID`` plus the suffix).
-_TMP = re.compile(r"^\..+\.tmp\d+(\.[^.]+)?$")
 #: Annotation files whose bytes enter the data fingerprint (images count by name and size).
 _TEXT_SUFFIXES = {".json", ".yml", ".yaml", ".csv", ".txt"}
 
@@ -142,17 +139,6 @@ def check_same_data(run_dir: Path, location: str, fingerprint: str) -> None:
 
 
 # -- resume hygiene ----------------------------------------------------------------------------------
-def remove_stale_temporaries(run_dir: Path) -> list[Path]:
-    """Delete the temporary files of atomic writes that a killed process left in ``run_dir``; returns them."""
-    stale = [p for p in sorted(run_dir.iterdir()) if p.is_file() and _TMP.match(p.name)]
-    for p in stale:
-        p.unlink()
-    if stale:
-        log.warning("%s: removed %d stale temporary file(s) of an interrupted save (%s)", run_dir, len(stale),
-                    ", ".join(p.name for p in stale))
-    return stale
-
-
 def repair_metrics(path: Path) -> bool:
     """Cut a ``metrics.csv`` that a crash left with NUL bytes or a half-written line back to its last
     complete line (one warning line); returns True if the file was changed."""

@@ -52,21 +52,6 @@ class TrainSchedule(Config):
     num_threads: int = bounded(0, min=0, max=1024)
     log_every: int = bounded(10, min=1, max=1_000_000)
 
-    def validate(self) -> None:
-        """Check the schedule fields (ValueError naming the field); subclasses call it first."""
-        for name in ("epochs", "batch_size", "lr_step_epochs", "log_every"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if not self.lr > 0:
-            raise ValueError(f"lr must be > 0, got {self.lr}")
-        if not 0 < self.lr_gamma <= 1:
-            raise ValueError(f"lr_gamma must be in (0, 1], got {self.lr_gamma}")
-        for name in ("warmup_steps", "weight_decay", "grad_clip", "max_steps_per_epoch", "num_workers", "num_threads"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if self.time_budget < 0:
-            raise ValueError(f"time_budget must be >= 0 (0: none), got {self.time_budget}")
-
 
 def learning_rate(cfg: TrainSchedule, epoch: int, step: int) -> float:
     """Learning rate of global ``step`` (0-based) in ``epoch`` (0-based).
