@@ -148,3 +148,30 @@ def test_malformed_symmetry_annotation_is_a_one_line_error(tmp_path, capsys):
     rc = main(["evaluate", "--data", str(bop), "--results", str(tmp_path / "r.csv"), "--min-px", "0"])
     err = [line for line in capsys.readouterr().err.splitlines() if "error:" in line]  # (progress bars aside)
     assert rc == 2 and len(err) == 1 and "models_info" in err[0] and "axis" in err[0], err
+
+
+def test_evaluate_scenes_scores_one_scene_only(tmp_path, capsys):
+    """``evaluate --scenes`` scores every image of the named scenes and ignores the other scenes' rows (the
+    leave-one-scene-out figures); a scene the dataset lacks is a one-line error."""
+    from sixdpose.artifacts.poses import PoseEstimate, write_results
+
+    bop = _exported(tmp_path)
+    ds = open_dataset(bop, split="test")
+    rows = []
+    for s in ds:
+        for g in s.instances:  # GT poses in scene 0, a pose 1 m off in the others
+            off = 0.0 if s.scene_id == 0 else 1.0
+            rows.append(PoseEstimate(s.scene_id, s.im_id, g.obj_id, 1.0, g.R, g.t + off, 0.1))
+    write_results(rows, tmp_path / "r.csv")
+    keys = ds.keys()
+    scenes = sorted({k[0] for k in keys})
+    n0 = sum(len(ds.load(k, masks=False, rgb=False, depth=False).instances) for k in keys if k[0] == scenes[0])
+    capsys.readouterr()
+    assert main(["evaluate", "--data", str(bop), "--results", str(tmp_path / "r.csv"), "--min-px", "0", "--no-bop",
+                 "--scenes", str(scenes[0]), "--out", str(tmp_path / "e0"), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert f"ADD(-S) accuracy 100.00% ({n0}/{n0} GT" in out, out
+    rc = main(["evaluate", "--data", str(bop), "--results", str(tmp_path / "r.csv"), "--scenes", "99",
+               "--out", str(tmp_path / "e1"), "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "--scenes" in err[0] and "99" in err[0]

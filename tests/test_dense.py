@@ -246,3 +246,46 @@ def test_class_without_training_instances_is_skipped_with_reason(tmp_path, head)
     other = [r for r in rows if r.obj_id == OID + 1]
     assert len(other) == 1 and other[0].score == 0 and "no training instance" in other[0].reason
     assert all(r.score > 0 for r in rows if r.obj_id == OID)
+
+
+def test_augment_changes_mask_and_depth_within_bounds():
+    """Mask jitter stays within its pixel budget, holes and noise only touch the masked depth, and the
+    default augmentation is the identity (a run without the fields is unchanged)."""
+    from scipy import ndimage
+
+    from sixdpose.pose.data import Augment
+
+    H, W = 60, 80
+    mask = np.zeros((H, W), bool)
+    mask[20:40, 30:55] = True
+    depth = np.full((H, W), 1.0, np.float32)
+    rng = np.random.default_rng(0)
+    assert np.array_equal(Augment().apply(mask, depth.copy(), rng), mask)
+    seen = set()
+    for s in range(30):
+        d = depth.copy()
+        out = Augment(mask_px=3).apply(mask, d, np.random.default_rng(s))
+        assert np.array_equal(d, depth)  # depth untouched without depth augmentation
+        assert (ndimage.binary_dilation(mask, iterations=3) >= out).all()
+        assert (out >= ndimage.binary_erosion(mask, iterations=3)).all()
+        seen.add(int(out.sum()) - int(mask.sum()))
+    assert any(k > 0 for k in seen) and any(k < 0 for k in seen)
+    d = depth.copy()
+    out = Augment(holes=0.5, depth_noise=0.01).apply(mask, d, np.random.default_rng(1))
+    assert np.array_equal(out, mask)
+    assert np.array_equal(d[~mask], depth[~mask])  # nothing outside the mask changes
+    assert (d[mask] == 0).any() and (d[mask] >= 0).all()
+    assert np.abs(d[mask & (d > 0)] - 1.0).max() < 0.1
+
+
+def test_crop_window_jitter_moves_and_scales_the_window():
+    """Crop jitter moves and scales the window within its bounds; 0 gives the exact box window."""
+    from sixdpose.pose.data import crop_window
+
+    mask = np.zeros((100, 100), bool)
+    mask[40:60, 30:70] = True
+    base = crop_window(mask, 0.1)
+    assert crop_window(mask, 0.1, 0.0, np.random.default_rng(0)) == base
+    y0, x0, side = crop_window(mask, 0.1, 0.2, np.random.default_rng(0))
+    assert (y0, x0, side) != base
+    assert base[2] * np.exp(-0.2) - 1e-9 <= side <= base[2] * np.exp(0.2) + 1e-9

@@ -26,6 +26,9 @@ def register(sub) -> None:
                         "predicted masks, where images without detections have no rows")
     O.add(p, "--limit", help="evaluate the first N images of the split, with or without rows (as register / "
                              "predict-pose --limit N ran them; 0: all)")
+    p.add_argument("--scenes", default=None,
+                   help="comma-separated scene ids: evaluate every image of these scenes only (rows of other scenes "
+                        "are ignored), e.g. one scene of a real sample for leave-one-scene-out figures")
     p.add_argument("--label", default=None, help="method label for the tables (default: results file stem)")
     O.add(p, "--no-progress")
     p.add_argument("--no-bop", action="store_true",
@@ -65,6 +68,9 @@ def _run(args) -> int:
             raise UserError(f"--symmetric-ids: expected comma-separated integers, got {args.symmetric_ids!r}") from None
     ds = open_dataset(args.data, split=args.split, **kw)
     images = ds.keys()[: args.limit] if args.limit else (ds.keys() if args.all_images else None)
+    if args.scenes is not None:
+        images = _scene_images(args.scenes, images if images is not None else ds.keys(), ds.location)
+        ests = [e for e in ests if (int(e.scene_id), int(e.im_id)) in set(images)]
     res = evaluate(ds, ests, min_px=args.min_px, threshold=args.threshold, progress=not args.no_progress, images=images,
                    bop=not args.no_bop)
     claim_output_dir(out, "evaluate")
@@ -94,6 +100,22 @@ def _run(args) -> int:
     return 0
 
 
+def _scene_images(text: str, keys, location) -> list:
+    """The keys of ``keys`` whose scene id is in the comma-separated ``text`` (UserError on a bad list or a
+    scene the dataset lacks)."""
+    from ..errors import UserError
+
+    try:
+        scenes = {int(x) for x in text.split(",") if x.strip()}
+    except ValueError:
+        raise UserError(f"--scenes: expected comma-separated integers, got {text!r}") from None
+    have = {int(k[0]) for k in keys}
+    if not scenes or scenes - have:
+        raise UserError(f"--scenes: scene(s) {sorted(scenes - have) or text!r} not in {location} "
+                        f"(it has {sorted(have)})")
+    return [k for k in keys if int(k[0]) in scenes]
+
+
 def _write_result(args, res, res_path: Path) -> None:
     """The evaluation as a result artifact: summary figures, per-object rows, the evaluation options and
     the configuration of the command that wrote the results CSV (``<results>.config.yml``, if present)."""
@@ -119,6 +141,7 @@ def _write_result(args, res, res_path: Path) -> None:
         results_dir=args.results_dir, command=getattr(args, "command_line", None),
         config={"data": str(args.data), "results": str(res_path), "split": args.split, "min_px": args.min_px,
                 "threshold": args.threshold, "symmetric_ids": args.symmetric_ids, "all_images": args.all_images,
+                "scenes": args.scenes,
                 "limit": args.limit,
                 "bop": not args.no_bop, "results_config": producer_cfg},
         inputs=inputs,

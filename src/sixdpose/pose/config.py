@@ -93,6 +93,11 @@ class PoseConfig(FrameSchedule):
             per-channel gains x U(0.85, 1.15), gamma exp(U(-0.3, 0.3))): another camera's white balance,
             exposure and response, for networks meant to run on real frames
             (:func:`~sixdpose.pose.data.normalise_images`).
+        mask_jitter_px, depth_noise, depth_holes, crop_jitter: training augmentation of each instance's
+            mask (eroded or dilated by up to N pixels), depth (Gaussian axial noise up to this many metres;
+            random holes up to this fraction of the mask) and crop window (relative shift and scale), as
+            real frames and predicted masks differ from rendered ones (:class:`~sixdpose.pose.data.Augment`;
+            0: none, the paper).
         max_images: train on the first N images only (0: all; the smoke profile uses a handful).
         repeat: each image is visited ``repeat`` times per epoch.
 
@@ -120,6 +125,10 @@ class PoseConfig(FrameSchedule):
     ransac_iterations: int = bounded(128, min=1, max=100_000)
     rgb_noise: float = bounded(0.3, min=0, max=1)
     colour_jitter: float = bounded(0.0, min=0, max=1, max_open=True)
+    mask_jitter_px: int = bounded(0, min=0, max=64)
+    depth_noise: float = bounded(0.0, min=0, max=0.1)
+    depth_holes: float = bounded(0.0, min=0, max=0.9)
+    crop_jitter: float = bounded(0.0, min=0, max=0.5)
     lr: float = bounded(1e-4, min=0, max=10, min_open=True)
     warmup_steps: int = bounded(1000, min=0, max=100_000_000)
     lr_step_epochs: int = bounded(5, min=1, max=100_000)

@@ -61,12 +61,21 @@ class Frame:
     instances: list[InstanceInput] = field(default_factory=list)
 
 
-def crop_window(mask: np.ndarray, margin: float) -> tuple[float, float, float]:
-    """Square window around a mask's box: ``(y0, x0, side)`` in pixels (side >= 8), enlarged by ``margin`` per side."""
+def crop_window(mask: np.ndarray, margin: float, jitter: float = 0.0,
+                rng: np.random.Generator | None = None) -> tuple[float, float, float]:
+    """Square window around a mask's box: ``(y0, x0, side)`` in pixels (side >= 8), enlarged by ``margin`` per side.
+
+    ``jitter`` > 0 (training only, needs ``rng``): the side is scaled by ``exp(U(-jitter, jitter))`` and
+    the centre moved by ``U(-jitter, jitter) * side / 2`` along each axis, as a detector's box would vary.
+    """
     v, u = np.nonzero(mask)
     v0, v1, u0, u1 = v.min(), v.max() + 1, u.min(), u.max() + 1
     side = max(float(max(v1 - v0, u1 - u0)) * (1.0 + 2.0 * margin), 8.0)
     cy, cx = (v0 + v1) / 2.0, (u0 + u1) / 2.0
+    if jitter > 0 and rng is not None:
+        dy, dx, ds = rng.uniform(-jitter, jitter, size=3)
+        cy, cx = cy + dy * side / 2.0, cx + dx * side / 2.0
+        side = max(side * float(np.exp(ds)), 8.0)
     return cy - side / 2.0, cx - side / 2.0, side
 
 
@@ -85,7 +94,7 @@ def crop_image(rgb: np.ndarray, y0: float, x0: float, side: float, size: int) ->
 def extract_instance(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, mask: np.ndarray, obj_id: int, *,
                      crop: int, margin: float, num_points: int, min_points: int, rng: np.random.Generator,
                      index: int = 0, score: float = 1.0, keep_points: bool = False,
-                     depth_band: float = 0.0) -> InstanceInput | str:
+                     depth_band: float = 0.0, crop_jitter: float = 0.0) -> InstanceInput | str:
     """Build the input of one instance, or return the reason it is unusable.
 
     Args:
@@ -100,6 +109,7 @@ def extract_instance(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, mask: np
             through a predicted mask's loose edges is, which would otherwise drag the cloud's centroid
             and so the translation tens of centimetres back; it assumes most masked pixels lie on the
             object, as the median is taken over all of them). 0 keeps every point.
+        crop_jitter: training augmentation of the crop window (:func:`crop_window`); 0 at inference.
     Returns:
         :class:`InstanceInput` or a reason string such as ``"3 valid depth pixels under the mask (< 10)"``.
     """
@@ -115,7 +125,7 @@ def extract_instance(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, mask: np
     sel = rng.permutation(n)[:num_points] if n > num_points else np.resize(rng.permutation(n), num_points)
     v, u = pix[sel, 0], pix[sel, 1]
     if crop:
-        y0, x0, side = crop_window(mask, margin)
+        y0, x0, side = crop_window(mask, margin, crop_jitter, rng)
         image = crop_image(rgb, y0, x0, side, crop)
         i = np.clip(np.floor((v + 0.5 - y0) * crop / side), 0, crop - 1).astype(np.int64)
         j = np.clip(np.floor((u + 0.5 - x0) * crop / side), 0, crop - 1).astype(np.int64)
@@ -224,6 +234,81 @@ def training_masks(sample, detections=None, iou_min: float = 0.5) -> list[tuple[
     return out
 
 
+@dataclass(frozen=True)
+class Augment:
+    """Training-time augmentation of an instance's mask and depth, as real frames and predicted masks differ
+    from rendered ones (all off by default; :class:`~sixdpose.pose.config.PoseConfig` fields of the same
+    meaning: ``mask_jitter_px``, ``depth_noise``, ``depth_holes``, ``crop_jitter``).
+
+    Attributes:
+        mask_px: the mask is eroded or dilated by ``k ~ U{-mask_px..mask_px}`` pixels (a predicted mask's
+            loose or tight edge: dilation brings background points in, which the dense head learns to give
+            a low confidence). An erosion that would leave nothing keeps the mask.
+        depth_noise: metres; standard deviation of the Gaussian axial noise added to the masked depth,
+            scaled per instance by ``U(0, 1)`` (a sensor noisier than the simulated one).
+        holes: largest fraction of the masked depth pixels removed as a few random discs (``U(0, holes)``
+            of the mask's area; a real sensor's missing returns on dark or shiny parts).
+        crop: crop-window jitter (:func:`crop_window`).
+    """
+
+    mask_px: int = 0
+    depth_noise: float = 0.0
+    holes: float = 0.0
+    crop: float = 0.0
+
+    @classmethod
+    def of(cls, cfg) -> Augment:
+        """The augmentation of a config (a :class:`~sixdpose.pose.config.PoseConfig`; other configs: none)."""
+        return cls(int(getattr(cfg, "mask_jitter_px", 0)), float(getattr(cfg, "depth_noise", 0.0)),
+                   float(getattr(cfg, "depth_holes", 0.0)), float(getattr(cfg, "crop_jitter", 0.0)))
+
+    @property
+    def touches_depth(self) -> bool:
+        """Whether :meth:`apply` changes depth (the caller then passes a copy it may write)."""
+        return self.depth_noise > 0 or self.holes > 0
+
+    def apply(self, mask: np.ndarray, depth: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The augmented mask (H, W) bool; ``depth`` (H, W, metres) is changed in place under it (noise, holes).
+
+        Works on the mask's bounding box (padded by ``mask_px``), so it costs little on a 640x480 frame.
+        """
+        from scipy import ndimage
+
+        mask = np.asarray(mask, dtype=bool)
+        v, u = np.nonzero(mask)
+        if not len(v):
+            return mask
+        H, W = mask.shape
+        p = self.mask_px + 1
+        r0, r1, c0, c1 = max(v.min() - p, 0), min(v.max() + 1 + p, H), max(u.min() - p, 0), min(u.max() + 1 + p, W)
+        sub = mask[r0:r1, c0:c1]
+        k = int(rng.integers(-self.mask_px, self.mask_px + 1)) if self.mask_px else 0
+        if k > 0:
+            sub = ndimage.binary_dilation(sub, iterations=k)
+        elif k < 0:
+            eroded = ndimage.binary_erosion(sub, iterations=-k)
+            sub = eroded if eroded.any() else sub
+        out = np.zeros_like(mask)
+        out[r0:r1, c0:c1] = sub
+        if not self.touches_depth:
+            return out
+        d = depth[r0:r1, c0:c1]  # a view: written in place
+        if self.holes > 0:
+            area = float(sub.sum())
+            n = int(rng.integers(1, 5))
+            radius = np.sqrt(rng.uniform(0.0, self.holes) * area / (n * np.pi))
+            sv, su = np.nonzero(sub)
+            pick = rng.integers(0, len(sv), size=n)
+            yy, xx = np.mgrid[0:sub.shape[0], 0:sub.shape[1]]
+            for cy, cx in zip(sv[pick], su[pick], strict=True):
+                d[sub & ((yy - cy) ** 2 + (xx - cx) ** 2 <= radius ** 2)] = 0.0
+        if self.depth_noise > 0:
+            sigma = self.depth_noise * rng.uniform(0.0, 1.0)
+            on = sub & (d > 0)
+            d[on] = np.maximum(d[on] + rng.normal(0.0, sigma, size=int(on.sum())), 0.0)
+        return out
+
+
 class FrameDataset(torch.utils.data.Dataset):
     """Training frames: item ``i`` = the usable instances of image ``keys[i]`` with their targets.
 
@@ -237,11 +322,19 @@ class FrameDataset(torch.utils.data.Dataset):
     def __init__(self, reader, keys, cfg, class_index, crop: int, margin: float, masks: str = "gt", seed: int = 0):
         self.reader, self.keys, self.cfg, self.class_index = reader, list(keys), cfg, class_index
         self.crop, self.margin, self.masks, self.seed = crop, margin, masks, seed
+        self.augment = Augment.of(cfg)
         self.epoch = 0
 
     def set_epoch(self, epoch: int) -> None:
         """Select the epoch (seeds the per-item sampling)."""
         self.epoch = epoch
+
+    def _band(self, obj_id: int) -> float:
+        """The object's diameter (metres): the depth band of a dilated mask, as inference uses it."""
+        bands = self.__dict__.setdefault("_bands", {})
+        if obj_id not in bands:
+            bands[obj_id] = float(self.reader.model(obj_id).diameter)
+        return bands[obj_id]
 
     def __len__(self):
         return len(self.keys)
@@ -256,11 +349,17 @@ class FrameDataset(torch.utils.data.Dataset):
 
             dets = read_predictions(self.masks, *key)
         frame = Frame(None if self.crop else s.rgb)
+        aug = self.augment
+        depth = s.depth
         for k, mask, oid in training_masks(s, dets):
             if oid not in self.class_index:
                 continue
-            inst = extract_instance(s.rgb, s.depth, s.K, mask, oid, crop=self.crop, margin=self.margin,
-                                    num_points=self.cfg.num_points, min_points=self.cfg.min_points, rng=rng, index=k)
+            if aug != Augment():
+                depth = s.depth.copy() if aug.touches_depth else s.depth  # each instance from the frame's own depth
+                mask = aug.apply(mask, depth, rng)
+            inst = extract_instance(s.rgb, depth, s.K, mask, oid, crop=self.crop, margin=self.margin,
+                                    num_points=self.cfg.num_points, min_points=self.cfg.min_points, rng=rng, index=k,
+                                    crop_jitter=aug.crop, depth_band=self._band(oid) if aug.mask_px else 0.0)
             if isinstance(inst, str):
                 continue
             inst.R, inst.t = s.instances[k].R, s.instances[k].t
