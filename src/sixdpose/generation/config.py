@@ -214,7 +214,8 @@ YCBV_SYMMETRIC: tuple[str, ...] = tuple(bop_name(k) for k in (1, 13, 14, 16, 18,
 #: splits on which the hybrid methods' defaults are chosen and then measured (never tuned on ``test``).
 #: ``ycbv``: training data for YCB-Video (seed 700, 60 scenes x 20 views): the 19 textured YCB-Video
 #: BOP models as targets (ground truth in their model frames and obj_ids), the other YCB objects as
-#: noise, the YCB-Video camera on a closer arc, ``kinect`` depth, a smaller table with fewer objects (the
+#: noise, the YCB-Video camera on a closer arc, ``kinect`` depth (its defaults calibrated on the sample's
+#: scene 000000 hole statistics, :func:`~sixdpose.generation.sensors.kinect`), a smaller table with fewer objects (the
 #: camera's narrow view sees a 0.4 x 0.3 m patch at 0.8 m), and a BOP copy in ``<out>/bop/train_synt``.
 #: ``ycbv_ideal``: the same scenes and images with the ideal depth (what the ``kinect`` model buys on real
 #: frames is measured against it).
