@@ -406,7 +406,7 @@ def kinect(
     disparity_step: float = 1 / 8,
     window: int = 3,
     edge_threshold: float = 0.25,
-    min_valid_fraction: float = 2 / 3,
+    min_valid_fraction: float = 1 / 2,
     max_angle: float = float(np.deg2rad(80.0)),
     noise_scale: float = 1.0,
 ) -> np.ndarray:
@@ -429,7 +429,7 @@ def kinect(
        and tilted planes pass (up to the quantisation of step 3, which steep planes feel at a
        small threshold); both sides of a depth step lose up to ``window // 2`` px, and holes grow.
        simkinect's values (9, 1/1.2, 0.3 px; :data:`KINECT_SIMKINECT`) make about twice the holes
-       of the YCB-Video sample's real frames on generated ``ycbv`` scenes; the defaults (3, 2/3,
+       of the YCB-Video sample's real frames on generated ``ycbv`` scenes; the defaults (3, 1/2,
        0.25 px) are calibrated on the sample's scene 000000 so that the hole fractions inside
        the objects' masks, at their 3 px rim and inside it, match
        (:func:`sixdpose.generation.checks.depth_hole_stats`, ``benchmarks/sensor_calibration.py``);
@@ -453,7 +453,7 @@ def kinect(
             the filter).
         edge_threshold: largest deviation of a pixel's disparity from its window mean, pixels
             (0.25, calibrated; simkinect 0.3).
-        min_valid_fraction: fraction of the window that must have depth, in [0, 1] (2/3,
+        min_valid_fraction: fraction of the window that must have depth, in [0, 1] (1/2,
             calibrated; simkinect 1/1.2).
         max_angle: clamp of theta in the noise formula, radians, below pi/2 (80 deg).
         noise_scale: factor on sigma_z (1; 0 disables the axial noise).
