@@ -301,6 +301,56 @@ def test_sensor_setting_applies_the_model_to_depth_only(tmp_path, ycb_dir, smoke
     assert "sensor: kinect" in (b / "config.yml").read_text()
 
 
+def _table_top_rgb(root, cfg) -> dict:
+    """scene -> median RGB of the table-top pixels of its first view (depth back-projected into the world
+    by gt.yml's camera pose: on the top face, inside the table, not a target)."""
+    from sixdpose.datasets import open_dataset
+    from sixdpose.datasets.geometry import backproject
+    from sixdpose.datasets.synthetic import load_yaml
+
+    gt, ds = load_yaml(root / "gt.yml"), open_dataset(root)
+    out = {}
+    for scene, im_id in ds.keys():  # noqa: SIM118 (a dataset reader, not a dict)
+        if im_id % cfg.views:
+            continue
+        s, im = ds.load((scene, im_id)), gt[im_id]
+        free = ~np.any([i.mask for i in s.instances], axis=0) if s.instances else np.ones(s.depth.shape, bool)
+        p_C, _, px = backproject(s.depth, s.K, free)
+        p_W = p_C @ np.asarray(im["cam_R_WC"]).T + np.asarray(im["cam_t_WC"])
+        top = (np.abs(p_W[:, 2] - cfg.table_height) < 0.002) & (np.abs(p_W[:, 0]) < cfg.table_size[0] / 2 - 0.02) \
+            & (np.abs(p_W[:, 1]) < cfg.table_size[1] / 2 - 0.02)
+        assert top.sum() > 1000
+        out[scene] = np.median(s.rgb[px[top, 0], px[top, 1]].astype(float), axis=0)
+    return out
+
+
+def test_randomise_recolours_the_table_per_scene_and_off_keeps_it(tmp_path, ycb_dir, smoke_config):
+    """``randomise=1``: the two scenes' tables get different colours, while gt.yml, depth and masks are
+    those of the run without it; ``randomise=0`` (the default): every table keeps the default diffuse
+    colour (its R:G:B ratios, whatever the shading)."""
+    from sixdpose.datasets import open_dataset
+    from sixdpose.generation import generate
+    from sixdpose.generation.sim import TABLE_RGB
+
+    cfg = smoke_config.replace(scenes=2, views=1)
+    a, b = tmp_path / "off", tmp_path / "on"
+    generate(a, cfg, workers=1, assets=ycb_dir, progress=False)
+    generate(b, cfg.replace(randomise=1.0), workers=1, assets=ycb_dir, progress=False)
+    assert (a / "gt.yml").read_bytes() == (b / "gt.yml").read_bytes()
+    da, db = open_dataset(a), open_dataset(b)
+    for key in da.keys():  # noqa: SIM118 (a dataset reader, not a dict)
+        sa, sb = da.load(key), db.load(key)
+        np.testing.assert_array_equal(sa.depth, sb.depth)
+        assert all(np.array_equal(ia.mask, ib.mask) for ia, ib in zip(sa.instances, sb.instances, strict=True))
+        assert not np.array_equal(sa.rgb, sb.rgb)
+    off, on = _table_top_rgb(a, cfg), _table_top_rgb(b, cfg)
+    for c in off.values():
+        np.testing.assert_allclose(c / c[1], np.array(TABLE_RGB) / TABLE_RGB[1], atol=0.06)
+    chroma = [c / max(c.sum(), 1.0) for c in on.values()]
+    assert np.abs(chroma[0] - chroma[1]).max() > 0.03 or abs(on[0].sum() - on[1].sum()) > 60
+    assert "randomise: 1.0" in (b / "config.yml").read_text()
+
+
 _DIVERGING = """
 import json, sys
 from pathlib import Path

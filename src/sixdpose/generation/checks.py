@@ -155,3 +155,108 @@ def resting_penetrations(
                 if p > worst_pair:
                     worst_pair, pair = p, (boxes[i][0], boxes[j][0])
     return {"table": worst_table, "pairs": worst_pair, "pair": pair}
+
+
+#: Width of the boundary band of :func:`depth_hole_stats`, pixels.
+EDGE_BAND_PX = 3
+
+
+def mask_hole_counts(depth: np.ndarray, mask: np.ndarray, edge_px: int = EDGE_BAND_PX) -> dict:
+    """Holes of one depth map inside one object mask, split into a boundary band and the interior.
+
+    Args:
+        depth: (H, W) float depth in metres; a hole is 0, NaN, inf or negative.
+        mask: (H, W) bool visible mask of the object.
+        edge_px: width of the band: mask pixels within ``edge_px`` px (chessboard distance) of a
+            pixel outside the mask or of the image border are ``edge``, the others ``interior``.
+    Returns:
+        ``{"px", "holes", "edge_px", "edge_holes", "interior_px", "interior_holes"}`` (int counts).
+    Raises:
+        ValueError: shapes differ, or edge_px < 0.
+    """
+    from scipy import ndimage
+
+    depth, mask = np.asarray(depth), np.asarray(mask, dtype=bool)
+    if depth.shape != mask.shape or depth.ndim != 2:
+        raise ValueError(f"depth {depth.shape} and mask {mask.shape} must be the same (H, W)")
+    if edge_px < 0:
+        raise ValueError(f"edge_px must be >= 0, got {edge_px}")
+    with np.errstate(invalid="ignore"):
+        hole = ~(np.isfinite(depth) & (depth > 0))
+    if edge_px > 0:
+        interior = ndimage.binary_erosion(mask, np.ones((3, 3), bool), iterations=edge_px, border_value=0)
+    else:
+        interior = mask
+    edge = mask & ~interior
+    return {"px": int(mask.sum()), "holes": int((hole & mask).sum()),
+            "edge_px": int(edge.sum()), "edge_holes": int((hole & edge).sum()),
+            "interior_px": int(interior.sum()), "interior_holes": int((hole & interior).sum())}
+
+
+def depth_hole_stats(data, *, split: str = "train_real", scenes=None, max_images: int | None = None,
+                     edge_px: int = EDGE_BAND_PX, depth_fn=None, residual: bool = False) -> dict:
+    """Depth statistics over the visible-object masks of a dataset: how much of each object a depth
+    sensor (real or simulated) fails to measure, at the object's rim and inside it.
+
+    Args:
+        data: a dataset path or reader (:func:`sixdpose.datasets.readers.as_reader`) with GT
+            visible masks and depth.
+        split: the BOP split of a path (``train_real``: the YCB-Video sample's); ignored otherwise.
+        scenes: scene ids to use (None: all).
+        max_images: at most this many images (in key order, after the scene filter).
+        edge_px: width of the rim band in pixels (:func:`mask_hole_counts`).
+        depth_fn: optional ``f(sample) -> (H, W) depth`` replacing the dataset's depth (e.g. a sensor
+            model applied to an ideal dataset's depth); None uses ``sample.depth``.
+        residual: also the distance (metres) of every measured masked pixel, back-projected and moved
+            into the object frame by the GT pose, to the nearest model point (``reader.model``'s
+            points; a KD-tree, so bounded below by the points' spacing).
+    Returns:
+        ``{"images", "instances", "px", "hole", "edge_hole", "interior_hole", "edge_share"}``: pooled
+        pixel fractions (holes / masked pixels; ``edge_share`` = edge pixels / masked pixels), plus
+        ``"residual_median"`` and ``"residual_p90"`` (metres) when ``residual``.
+    Raises:
+        DatasetError: the dataset has no depth or no masks.
+    """
+    from ..datasets.base import DatasetError
+    from ..datasets.geometry import backproject
+    from ..datasets.readers import as_reader
+
+    reader = as_reader(data, split=split)
+    if not reader.has_masks or (depth_fn is None and not reader.has_depth):
+        raise DatasetError(f"{reader.location}: hole statistics need visible masks and depth")
+    wanted = None if scenes is None else {int(x) for x in scenes}
+    keys = [k for k in list(reader.keys()) if wanted is None or k[0] in wanted][: max_images or None]
+    tot = dict.fromkeys(("px", "holes", "edge_px", "edge_holes", "interior_px", "interior_holes"), 0)
+    n_inst, dists, trees = 0, [], {}
+    for key in keys:
+        s = reader.load(key, rgb=depth_fn is not None)
+        depth = s.depth if depth_fn is None else depth_fn(s)
+        if depth is None:
+            raise DatasetError(f"{reader.location}: image {key} has no depth")
+        for inst in s.instances:
+            if inst.mask is None or not inst.mask.any():
+                continue
+            c = mask_hole_counts(depth, inst.mask, edge_px)
+            for k in tot:
+                tot[k] += c[k]
+            n_inst += 1
+            if residual:
+                from scipy.spatial import cKDTree
+
+                if inst.obj_id not in trees:
+                    trees[inst.obj_id] = cKDTree(reader.model(inst.obj_id).points)
+                p_C = backproject(np.asarray(depth, dtype=np.float32), s.K, inst.mask)[0]
+                if len(p_C):
+                    dists.append(trees[inst.obj_id].query((p_C - inst.t) @ inst.R)[0])
+
+    def frac(a, b):
+        return float(tot[a] / tot[b]) if tot[b] else float("nan")
+
+    out = {"images": len(keys), "instances": n_inst, "px": tot["px"], "hole": frac("holes", "px"),
+           "edge_hole": frac("edge_holes", "edge_px"), "interior_hole": frac("interior_holes", "interior_px"),
+           "edge_share": frac("edge_px", "px")}
+    if residual:
+        d = np.concatenate(dists) if dists else np.zeros(0)
+        out["residual_median"] = float(np.median(d)) if d.size else float("nan")
+        out["residual_p90"] = float(np.percentile(d, 90)) if d.size else float("nan")
+    return out

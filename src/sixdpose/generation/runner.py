@@ -93,9 +93,17 @@ def render_scene(root: Path, cfg: GenerationConfig, objects: ObjectSet | Path, s
                 f"not at rest after {cfg.sim_time} s (or the simulation diverged) in {cfg.max_attempts} attempts"
             )
         views, images = {}, []
+        look = None
+        if cfg.randomise > 0:  # domain randomisation: colours per scene, camera and light per view
+            from .randomise import randomise_view, scene_look, view_look
+
+            look = scene_look(cfg.seed, scene, [k + 1 for k, s in enumerate(specs)
+                                                if s.role == "noise" and k not in res.left], cfg.randomise)
         for v, X_WC in enumerate(cams):
             im_id = scene * cfg.views + v
             rgb, depth, label = sim.render(X_WC)
+            if look is not None:
+                rgb = randomise_view(rgb, label, look, view_look(cfg.seed, scene, v, cfg.randomise))
             if cfg.sensor != "ideal":  # what the sensor sees; masks and poses stay exact
                 depth = simulate_depth(depth, K, cfg.sensor, sensor_rng(cfg.seed, scene, v), rgb=rgb)
             X_CW = np.linalg.inv(X_WC)

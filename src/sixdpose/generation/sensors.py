@@ -39,6 +39,7 @@ __all__ = [
     "nguyen_sigma",
     "azure_sigma",
     "kinect",
+    "KINECT_SIMKINECT",
     "realsense",
     "azure",
 ]
@@ -47,6 +48,11 @@ SENSORS = ("ideal", "kinect", "realsense", "azure")
 #: Last word of every :func:`sensor_rng` seed (ASCII "SENS"): keeps the sensor streams apart from
 #: the generator's other streams (``scene_rng`` seeds with ``[seed, scene, attempt]``).
 SENSOR_RNG_TAG = 0x53454E53
+
+#: simkinect's own validity-window settings (Barron & Malik 2013): a 9 x 9 window, at least 1/1.2 of it
+#: valid, disparity within 0.3 px of the window mean. :func:`kinect`'s defaults are instead calibrated
+#: on the YCB-Video sample (``benchmarks/sensor_calibration.py``); pass these to get simkinect's filter.
+KINECT_SIMKINECT = {"window": 9, "min_valid_fraction": 1 / 1.2, "edge_threshold": 0.3}
 
 _F32 = np.float32
 _HALF_PI = _F32(np.pi / 2)
@@ -398,9 +404,9 @@ def kinect(
     baseline: float = 0.075,
     pixel_shift_sigma: float = 0.5,
     disparity_step: float = 1 / 8,
-    window: int = 9,
-    edge_threshold: float = 0.3,
-    min_valid_fraction: float = 1 / 1.2,
+    window: int = 3,
+    edge_threshold: float = 0.25,
+    min_valid_fraction: float = 1 / 2,
     max_angle: float = float(np.deg2rad(80.0)),
     noise_scale: float = 1.0,
 ) -> np.ndarray:
@@ -417,11 +423,16 @@ def kinect(
        ``(u, v) + N(0, s^2)`` per axis, ``s = pixel_shift_sigma`` = 0.5 px;
     3. disparity ``d = fx B / z`` rounded to ``disparity_step`` = 1/8 px;
     4. dot-pattern validity filter (a vectorised stand-in for simkinect's 9x9 window test): a pixel
-       is kept if at least ``min_valid_fraction`` (1/1.2) of its ``window`` x ``window``
-       neighbourhood has depth and its quantised disparity is within ``edge_threshold`` px of the
-       window's mean valid disparity. A plane's disparity is affine in (u, v), so its window mean
-       is the centre value and tilted planes pass; both sides of a depth step lose up to
-       ``window // 2`` px, and holes grow by a few pixels;
+       is kept if at least ``min_valid_fraction`` of its ``window`` x ``window`` neighbourhood has
+       depth and its quantised disparity is within ``edge_threshold`` px of the window's mean valid
+       disparity. A plane's disparity is affine in (u, v), so its window mean is the centre value
+       and tilted planes pass (up to the quantisation of step 3, which steep planes feel at a
+       small threshold); both sides of a depth step lose up to ``window // 2`` px, and holes grow.
+       simkinect's values (9, 1/1.2, 0.3 px; :data:`KINECT_SIMKINECT`) make about twice the holes
+       of the YCB-Video sample's real frames on generated ``ycbv`` scenes; the defaults (3, 1/2,
+       0.25 px) are calibrated on the sample's scene 000000 so that the hole fractions inside
+       the objects' masks, at their 3 px rim and inside it, match
+       (:func:`sixdpose.generation.checks.depth_hole_stats`, ``benchmarks/sensor_calibration.py``);
     5. axial noise (Nguyen, Izadi & Lovell 2012, 3DIMPVT; :func:`nguyen_sigma`):
        ``z += sigma_z(z, theta) N(0, 1)``, ``sigma_z = 0.0012 + 0.0019 (z - 0.4)^2 +
        (0.0001 / sqrt(z)) theta^2 / (pi/2 - theta)^2`` m, theta from :func:`surface_angle`
@@ -438,9 +449,12 @@ def kinect(
         baseline: projector-camera baseline B in metres (0.075); negative puts the projector at -x.
         pixel_shift_sigma: std of the lateral jitter in pixels (0.5; 0 disables).
         disparity_step: disparity quantisation in pixels (1/8; 0 disables).
-        window: side of the validity window in pixels (9; odd; 1 disables the filter).
-        edge_threshold: largest deviation of a pixel's disparity from its window mean, pixels (0.3).
-        min_valid_fraction: fraction of the window that must have depth, in [0, 1] (1/1.2).
+        window: side of the validity window in pixels (3, calibrated; simkinect 9; odd; 1 disables
+            the filter).
+        edge_threshold: largest deviation of a pixel's disparity from its window mean, pixels
+            (0.25, calibrated; simkinect 0.3).
+        min_valid_fraction: fraction of the window that must have depth, in [0, 1] (1/2,
+            calibrated; simkinect 1/1.2).
         max_angle: clamp of theta in the noise formula, radians, below pi/2 (80 deg).
         noise_scale: factor on sigma_z (1; 0 disables the axial noise).
     Returns:

@@ -38,6 +38,11 @@ from .scene import ObjectSpec
 
 TABLE_LABEL = 1000
 GROUND_LABEL = 1001
+EMPTY_LABEL = 32766  #: the label image's value where no geometry is hit
+#: Diffuse colours (RGB in [0, 1]) of the table top, its legs and the floor.
+TABLE_RGB = (0.55, 0.40, 0.26)
+LEG_RGB = (0.45, 0.32, 0.2)
+GROUND_RGB = (0.62, 0.62, 0.6)
 _CONTACT_SPHERE_RADIUS = 1e-3
 _PARKING = np.array([0.0, 0.0, -100.0])  # with x >= 1 km: beyond the far clipping plane
 
@@ -90,12 +95,12 @@ def _static_scene(cfg: GenerationConfig):
     leg_h = cfg.table_height - thick
     out = []
     X = X_from(np.eye(3), (0.0, 0.0, cfg.table_height - thick / 2))
-    out.append(("table", X, (tx, ty, thick), (0.55, 0.40, 0.26, 1.0), TABLE_LABEL))
+    out.append(("table", X, (tx, ty, thick), (*TABLE_RGB, 1.0), TABLE_LABEL))
     for i, (sx, sy) in enumerate([(1, 1), (1, -1), (-1, 1), (-1, -1)]):
         X = X_from(np.eye(3), (sx * (tx / 2 - 0.05), sy * (ty / 2 - 0.05), leg_h / 2))
-        out.append((f"leg{i}", X, (0.05, 0.05, leg_h), (0.45, 0.32, 0.2, 1.0), TABLE_LABEL))
+        out.append((f"leg{i}", X, (0.05, 0.05, leg_h), (*LEG_RGB, 1.0), TABLE_LABEL))
     X = X_from(np.eye(3), (0.0, 0.0, -0.5))  # a thick box: its top face is the floor at z = 0
-    out.append(("ground", X, (30.0, 30.0, 1.0), (0.62, 0.62, 0.6, 1.0), GROUND_LABEL))
+    out.append(("ground", X, (30.0, 30.0, 1.0), (*GROUND_RGB, 1.0), GROUND_LABEL))
     return out
 
 
@@ -311,7 +316,7 @@ class PoolRenderer:
             raise RuntimeError(f"objects not in the renderer's catalogue: {sorted(set(unknown))}")
         lut = np.zeros(1 << 15, dtype=np.int32)
         lut[TABLE_LABEL], lut[GROUND_LABEL] = TABLE_LABEL, GROUND_LABEL
-        lut[32766] = 32766  # empty
+        lut[EMPTY_LABEL] = EMPTY_LABEL
         poses = FramePoseVector()
         placed = {}
         for k, s in enumerate(specs):
