@@ -33,6 +33,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import numba
 import numpy as np
 
 if TYPE_CHECKING:
@@ -77,6 +78,15 @@ class Surface:
     axes: np.ndarray
     centroid: np.ndarray
     diameter: float
+
+    def __post_init__(self):
+        self._f32: dict = {}
+
+    def cast(self, name: str) -> np.ndarray:
+        """The attribute ``name`` as a contiguous float32 array (cached: the Numba kernel's input)."""
+        if name not in self._f32:
+            self._f32[name] = np.ascontiguousarray(getattr(self, name), dtype=np.float32)
+        return self._f32[name]
 
 
 def grey_of(rgb: np.ndarray) -> np.ndarray:
@@ -151,9 +161,131 @@ class Scores:
     textured: bool
 
 
-def _frame_colours(rgb: np.ndarray, v: np.ndarray, u: np.ndarray) -> np.ndarray:
-    c = rgb[v, u]
-    return c.astype(np.float64) / 255.0 if c.dtype == np.uint8 else c.astype(np.float64)
+@numba.njit(cache=True, fastmath=True, nogil=True)
+def _score_kernel(pts, nrm, grey, chrom, textured, Rs, ts, fx, fy, cx, cy, depth, mask, rgb, cell, gw, gh, mcell,
+                  tau, zbuf, sil, su, sv, sz, out):  # pragma: no cover - njit
+    """Per hypothesis ``h`` (pose ``Rs[h]``, ``ts[h]``): project the front-facing samples ``pts``
+    (normals ``nrm``) into the image's cell grid (``cell`` pixels, ``gw`` x ``gh``), keep the nearest
+    per cell (``zbuf``), then classify the visible samples against ``depth`` and ``mask`` and accumulate
+    into ``out[h]``: agree, wrong, visible, silhouette cells, silhouette & mask cells, then the texture
+    sums of the agreeing samples in the mask (n; grey: sum m, sum f, sum m^2, sum f^2, sum m f;
+    chromaticity: sum m (3), sum f (3), sum |m|^2, sum |f|^2, sum m . f)."""
+    N = pts.shape[0]
+    Hh, Ww = depth.shape
+    G = gw * gh
+    for h in range(Rs.shape[0]):
+        for g in range(G):
+            zbuf[g] = np.inf
+            sil[g] = False
+        for k in range(N):
+            x = Rs[h, 0, 0] * pts[k, 0] + Rs[h, 0, 1] * pts[k, 1] + Rs[h, 0, 2] * pts[k, 2] + ts[h, 0]
+            y = Rs[h, 1, 0] * pts[k, 0] + Rs[h, 1, 1] * pts[k, 1] + Rs[h, 1, 2] * pts[k, 2] + ts[h, 1]
+            z = Rs[h, 2, 0] * pts[k, 0] + Rs[h, 2, 1] * pts[k, 1] + Rs[h, 2, 2] * pts[k, 2] + ts[h, 2]
+            sz[k] = -1.0
+            if z <= 1e-6:
+                continue
+            nx = Rs[h, 0, 0] * nrm[k, 0] + Rs[h, 0, 1] * nrm[k, 1] + Rs[h, 0, 2] * nrm[k, 2]
+            ny = Rs[h, 1, 0] * nrm[k, 0] + Rs[h, 1, 1] * nrm[k, 1] + Rs[h, 1, 2] * nrm[k, 2]
+            nz = Rs[h, 2, 0] * nrm[k, 0] + Rs[h, 2, 1] * nrm[k, 1] + Rs[h, 2, 2] * nrm[k, 2]
+            if nx * x + ny * y + nz * z >= 0:  # back-facing
+                continue
+            uf = fx * x / z + cx
+            vf = fy * y / z + cy
+            if uf < 0 or vf < 0 or uf >= Ww or vf >= Hh:
+                continue
+            u = int(uf)
+            v = int(vf)
+            su[k] = u
+            sv[k] = v
+            sz[k] = z
+            c = (v // cell) * gw + u // cell
+            if z < zbuf[c]:
+                zbuf[c] = z
+        agree = 0.0
+        wrong = 0.0
+        nvis = 0.0
+        acc = np.zeros(15)
+        for k in range(N):
+            z = sz[k]
+            if z < 0:
+                continue
+            u = su[k]
+            v = sv[k]
+            c = (v // cell) * gw + u // cell
+            if z > zbuf[c] + tau:  # hidden by the model's own nearer surface
+                continue
+            nvis += 1.0
+            d = depth[v, u]
+            inm = mask[v, u]
+            if not (d > 0):  # unknown depth (0 or NaN)
+                if inm:
+                    sil[c] = True
+                continue
+            dz = z - d
+            if dz > tau and not inm:  # behind the observed surface: occluded, not wrong
+                continue
+            sil[c] = True
+            if abs(dz) <= tau:
+                agree += 1.0
+                if inm and textured:
+                    r = rgb[v, u, 0] / 255.0
+                    g = rgb[v, u, 1] / 255.0
+                    b = rgb[v, u, 2] / 255.0
+                    gf = 0.299 * r + 0.587 * g + 0.114 * b
+                    gm = grey[k]
+                    acc[0] += 1.0
+                    acc[1] += gm
+                    acc[2] += gf
+                    acc[3] += gm * gm
+                    acc[4] += gf * gf
+                    acc[5] += gm * gf
+                    s = r + g + b + 0.05
+                    for ch in range(3):
+                        cf = (r if ch == 0 else (g if ch == 1 else b)) / s
+                        cm = chrom[k, ch]
+                        acc[6 + ch] += cm
+                        acc[9 + ch] += cf
+                        acc[12] += cm * cm
+                        acc[13] += cf * cf
+                        acc[14] += cm * cf
+            else:
+                wrong += 1.0
+        nsil = 0.0
+        ninter = 0.0
+        nmask = 0.0
+        for g in range(G):
+            if mcell[g]:
+                nmask += 1.0
+            if sil[g]:
+                nsil += 1.0
+                if mcell[g]:
+                    ninter += 1.0
+        out[h, 0] = agree
+        out[h, 1] = wrong
+        out[h, 2] = nvis
+        out[h, 3] = ninter
+        out[h, 4] = nsil + nmask - ninter
+        for j in range(15):
+            out[h, 5 + j] = acc[j]
+
+
+def _corr_from_sums(n, sa, sb, saa, sbb, sab):
+    """Correlation from sums (n, sum a, sum b, sum a^2, sum b^2, sum ab; arrays or scalars); channels
+    summed when ``sa``, ``sb`` are (..., C)."""
+    ca = saa - (sa * sa).sum(axis=-1) / n
+    cb = sbb - (sb * sb).sum(axis=-1) / n
+    cab = sab - (sa * sb).sum(axis=-1) / n
+    return cab / (np.sqrt(np.maximum(ca, 0) * np.maximum(cb, 0)) + 1e-12)
+
+
+def warmup() -> None:
+    """Compile :func:`_score_kernel` (or load it from Numba's cache) on a tiny input."""
+    f4 = np.float32
+    _score_kernel(np.zeros((1, 3), f4), np.zeros((1, 3), f4), np.zeros(1, f4), np.zeros((1, 3), f4), True,
+                  np.eye(3, dtype=f4)[None], np.zeros((1, 3), f4), 1.0, 1.0, 0.0, 0.0, np.zeros((2, 2), f4),
+                  np.zeros((2, 2), np.bool_), np.zeros((2, 2, 3), np.uint8), 1, 2, 2, np.zeros(4, np.bool_), 0.01,
+                  np.zeros(4), np.zeros(4, np.bool_), np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(1),
+                  np.zeros((1, 20)))
 
 
 def score_hypotheses(Xs: np.ndarray, surface: Surface, frame: Frame, cfg: RegistrationConfig) -> Scores:
@@ -161,95 +293,55 @@ def score_hypotheses(Xs: np.ndarray, surface: Surface, frame: Frame, cfg: Regist
 
     The terms are described in the module docstring; ``cfg.verify_tau_rel`` (depth tolerance /
     diameter), ``verify_w_depth``, ``verify_w_mask``, ``verify_w_texture`` (weights) and
-    ``verify_max_cells`` (cells along the longer side of the grid, at most) are the parameters.
+    ``verify_max_cells`` (cells along the image's longer side, at most) are the parameters. One Numba
+    pass per hypothesis (no (H, N) temporaries).
     Returns:
         :class:`Scores`; ``score`` in [-1, 1] (a hypothesis with no visible sample scores -1).
+    Raises:
+        ValueError: an empty instance mask.
     """
-    from .verify import chroma
-
-    Xs = np.asarray(Xs, dtype=np.float64)
+    Xs = np.asarray(Xs, dtype=np.float64).reshape(-1, 4, 4)
     H = len(Xs)
     Hh, Ww = frame.mask.shape
-    K = np.asarray(frame.K, dtype=np.float64)
-    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    R, t = Xs[:, :3, :3], Xs[:, :3, 3]
-    P = np.einsum("hij,nj->hni", R, surface.points) + t[:, None, :]
-    Nc = np.einsum("hij,nj->hni", R, surface.normals)
-    z = P[..., 2]
-    zs = np.where(z > 1e-6, z, 1.0)
-    uf = fx * P[..., 0] / zs + cx
-    vf = fy * P[..., 1] / zs + cy
-    valid = (z > 1e-6) & (np.einsum("hni,hni->hn", Nc, P) < 0) & (uf >= 0) & (uf < Ww) & (vf >= 0) & (vf < Hh)
-    u = np.clip(uf, 0, Ww - 1).astype(np.int64)
-    v = np.clip(vf, 0, Hh - 1).astype(np.int64)
-    # the grid: the mask's bounding box and every hypothesis's projection
     mv, mu = np.nonzero(frame.mask)
     if len(mu) == 0:
         raise ValueError("empty instance mask")
-    uu, vv = u[valid], v[valid]
-    x0 = min(int(mu.min()), int(uu.min()) if len(uu) else Ww)
-    x1 = max(int(mu.max()), int(uu.max()) if len(uu) else 0) + 1
-    y0 = min(int(mv.min()), int(vv.min()) if len(vv) else Hh)
-    y1 = max(int(mv.max()), int(vv.max()) if len(vv) else 0) + 1
-    zmed = float(np.median(z[valid])) if valid.any() else 1.0
-    cell = max(1, math.ceil(max(fx, fy) * surface.spacing / max(zmed, 1e-3)),
-               math.ceil(max(x1 - x0, y1 - y0) / cfg.verify_max_cells))
-    gw, gh = math.ceil((x1 - x0) / cell), math.ceil((y1 - y0) / cell)
+    K = np.asarray(frame.K, dtype=np.float64)
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    zmed = float(np.median(Xs[:, 2, 3]))
+    cell = max(1, math.ceil(max(fx, fy) * surface.spacing / max(zmed, 1e-3)), math.ceil(max(Hh, Ww) / cfg.verify_max_cells))
+    gw, gh = math.ceil(Ww / cell), math.ceil(Hh / cell)
     G = gw * gh
-    ci = ((v - y0) // cell) * gw + (u - x0) // cell
-    flat = np.arange(H)[:, None] * G + np.clip(ci, 0, G - 1)
-    zbuf = np.full(H * G, np.inf)
-    np.minimum.at(zbuf, flat[valid], z[valid])
-    tau = cfg.verify_tau_rel * surface.diameter
-    visible = valid & (z <= zbuf[flat] + tau)
-    D = np.asarray(frame.depth, dtype=np.float64)[v, u]
-    known = np.isfinite(D) & (D > 0)
-    inm = frame.mask[v, u]
-    dz = np.where(known, z - D, 0.0)
-    agree = visible & known & (np.abs(dz) <= tau)
-    wrong = visible & known & ((dz < -tau) | (inm & (dz > tau)))
-    occluded = visible & known & ~inm & (dz > tau)
-    n_agree = agree.sum(axis=1)
-    n_wrong = wrong.sum(axis=1)
-    depth = n_agree / np.maximum(n_agree + n_wrong, 1)
-    # silhouette against the mask's cells
-    sil = np.zeros(H * G, dtype=bool)
-    sil[flat[visible & ~occluded]] = True
-    sil = sil.reshape(H, G)
-    mcell = np.zeros(G, dtype=bool)
-    mcell[((mv - y0) // cell) * gw + (mu - x0) // cell] = True
-    inter = (sil & mcell).sum(axis=1)
-    union = (sil | mcell).sum(axis=1)
-    iou = inter / np.maximum(union, 1)
-    # texture: agreeing samples inside the mask
-    texture = np.zeros(H)
+    mcell = np.zeros(G, dtype=np.bool_)
+    mcell[(mv // cell) * gw + mu // cell] = True
     textured = surface.grey is not None and frame.rgb is not None
+    rgb = frame.rgb if textured else np.zeros((1, 1, 3), np.uint8)
+    if rgb.dtype != np.uint8:
+        rgb = np.clip(np.asarray(rgb) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    f4 = np.float32
+    Np = len(surface.points)
+    pts, nrm = surface.cast("points"), surface.cast("normals")
+    grey = surface.cast("grey") if textured else np.zeros(1, f4)
+    chrom = surface.cast("chroma") if textured else np.zeros((1, 3), f4)
+    depth = frame.depth if frame.depth.dtype == f4 else frame.depth.astype(f4)
+    out = np.zeros((H, 20))
+    _score_kernel(pts, nrm, grey, chrom, textured, Xs[:, :3, :3].astype(f4), Xs[:, :3, 3].astype(f4), fx, fy, cx, cy,
+                  depth, np.ascontiguousarray(frame.mask, dtype=np.bool_), np.ascontiguousarray(rgb), cell, gw, gh,
+                  mcell, cfg.verify_tau_rel * surface.diameter, np.empty(G), np.empty(G, np.bool_),
+                  np.empty(Np, np.int64), np.empty(Np, np.int64), np.empty(Np), out)
+    agree, wrong, n_vis, inter, union = out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4]
+    depth_s = agree / np.maximum(agree + wrong, 1.0)
+    iou = inter / np.maximum(union, 1.0)
+    texture = np.zeros(H)
     if textured:
-        sel = agree & inm
-        w = sel.astype(np.float64)
-        n = np.maximum(w.sum(axis=1), 1.0)
-        col_f = _frame_colours(frame.rgb, v, u)  # (H, N, 3)
-        g_f = grey_of(col_f)
-        g_m = np.broadcast_to(surface.grey, g_f.shape)
-        texture = 0.5 * (_ncc(g_m[..., None], g_f[..., None], w, n) + _ncc(
-            np.broadcast_to(surface.chroma, col_f.shape), chroma(col_f.reshape(-1, 3)).reshape(col_f.shape), w, n))
-        texture = np.where(sel.sum(axis=1) >= 3, texture, 0.0)
+        n = np.maximum(out[:, 5], 1.0)
+        ncc_g = _corr_from_sums(n, out[:, 6:7], out[:, 7:8], out[:, 8], out[:, 9], out[:, 10])
+        ncc_c = _corr_from_sums(n, out[:, 11:14], out[:, 14:17], out[:, 17], out[:, 18], out[:, 19])
+        texture = np.where(out[:, 5] >= 3, 0.5 * (ncc_g + ncc_c), 0.0)
     wd, wm, wt = cfg.verify_w_depth, cfg.verify_w_mask, (cfg.verify_w_texture if textured else 0.0)
-    score = (wd * depth + wm * iou + wt * texture) / max(wd + wm + wt, 1e-12)
-    n_vis = visible.sum(axis=1)
+    score = (wd * depth_s + wm * iou + wt * texture) / max(wd + wm + wt, 1e-12)
     score = np.where(n_vis > 0, score, -1.0)
-    return Scores(score, depth, iou, texture, n_vis, textured)
-
-
-def _ncc(a: np.ndarray, b: np.ndarray, w: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Weighted correlation over axis 1 of (H, N, C) features ``a`` and ``b`` (weights (H, N), their
-    sums ``n`` (H,)): the channels' centred products summed -> (H,) in [-1, 1]."""
-    ma = np.einsum("hn,hnc->hc", w, a) / n[:, None]
-    mb = np.einsum("hn,hnc->hc", w, b) / n[:, None]
-    da, db = a - ma[:, None, :], b - mb[:, None, :]
-    num = np.einsum("hn,hnc,hnc->h", w, da, db)
-    den = np.sqrt(np.einsum("hn,hnc,hnc->h", w, da, da) * np.einsum("hn,hnc,hnc->h", w, db, db))
-    return num / (den + 1e-12)
+    return Scores(score, depth_s, iou, texture, n_vis, textured)
 
 
 @dataclass

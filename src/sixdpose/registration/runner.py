@@ -114,6 +114,10 @@ def _init_worker(ds: DatasetReader, method: str, icp: bool, cfg: RegistrationCon
         from .verify import warmup
 
         warmup()  # compile (or load from the on-disk cache) the Numba kernel now: a start-up cost, like imports
+    if _W["cfg"].verify:
+        from .hypotheses import warmup as warmup_verify
+
+        warmup_verify()
 
 
 def process_image(index: int) -> tuple[list[PoseEstimate], tuple | None]:
