@@ -8,6 +8,7 @@ import logging
 import numpy as np
 import pytest
 
+from sixdpose.geometry import X_from
 from sixdpose.registration import hypotheses as H
 from sixdpose.registration.presets import get_preset
 
@@ -42,10 +43,9 @@ def colours_of(p: np.ndarray) -> np.ndarray:
     return np.clip(np.stack([s, 0.2 + stripe, 1 - s], axis=1), 0, 1)
 
 
-def X(R=np.eye(3), t=(0, 0, 0.5)):
-    out = np.eye(4)
-    out[:3, :3], out[:3, 3] = R, t
-    return out
+def X(R=None, t=(0, 0, 0.5)):
+    """A pose ``X_CO`` (the identity rotation by default, half a metre in front of the camera)."""
+    return X_from(np.eye(3) if R is None else R, t)
 
 
 def rot(axis: int, deg: float) -> np.ndarray:

@@ -36,6 +36,8 @@ from typing import TYPE_CHECKING
 import numba
 import numpy as np
 
+from ..geometry import X_from
+
 if TYPE_CHECKING:
     from .geometry import ReferenceCache
     from .presets import RegistrationConfig
@@ -141,10 +143,7 @@ def turns(surface: Surface, n_turns: int) -> np.ndarray:
     for a in range(3):
         for k in range(1, n_turns):
             S = Rotation.from_rotvec(surface.axes[:, a] * (2 * math.pi * k / n_turns)).as_matrix()
-            X = np.eye(4)
-            X[:3, :3] = S
-            X[:3, 3] = c - S @ c
-            out.append(X)
+            out.append(X_from(S, c - S @ c))
     return np.stack(out)
 
 
@@ -309,7 +308,9 @@ def score_hypotheses(Xs: np.ndarray, surface: Surface, frame: Frame, cfg: Regist
     K = np.asarray(frame.K, dtype=np.float64)
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     zmed = float(np.median(Xs[:, 2, 3]))
-    cell = max(1, math.ceil(max(fx, fy) * surface.spacing / max(zmed, 1e-3)), math.ceil(max(Hh, Ww) / cfg.verify_max_cells))
+    # cells about the projected sample spacing (no holes between splatted samples), at most max_cells a side
+    cell = max(1, math.ceil(max(fx, fy) * surface.spacing / max(zmed, 1e-3)),
+               math.ceil(max(Hh, Ww) / cfg.verify_max_cells))
     gw, gh = math.ceil(Ww / cell), math.ceil(Hh / cell)
     G = gw * gh
     mcell = np.zeros(G, dtype=np.bool_)
@@ -373,7 +374,8 @@ def verify_hypotheses(
         X_CO: (4, 4) the pose so far (object in camera, metres). surface: the object's :class:`Surface`.
         frame: the :class:`Frame`. cfg: ``verify_*`` fields (``verify_turns``: turns per principal
             axis, 0 or 1 for none; ``verify_icp``: hypotheses ICP'd at most; ``verify_margin``: only
-            the best is ICP'd when it leads the second by this much).
+            the best is ICP'd when it leads the second by this much; ``verify_min_gain``: another
+            hypothesis replaces ``X_CO`` only when it scores this much higher).
         extra: optional (E, 4, 4) further poses (other basins of the colour search, the global
             method's); their turns are scored too.
         icp: ``icp(X_CO) -> X_CO`` refinement (None: no ICP). obj_id: for the textureless log line.
@@ -401,4 +403,8 @@ def verify_hypotheses(
         s2 = score_hypotheses(refined, surface, frame, cfg).score
         j = int(np.argmax(s2))
         best_i, best_X, best_s = int(order[j]), refined[j], float(s2[j])
+    # the input pose stays unless another scores clearly higher (near-ties are common on real frames:
+    # a flat bottle's front and back; the pose so far already fits the masked cloud)
+    if best_i != 0 and best_s < sc.score[0] + cfg.verify_min_gain:
+        best_i, best_X, best_s = 0, Xs[0], float(sc.score[0])
     return Verified(best_X, best_s, best_i, len(Xs), n_icp, sc.textured)

@@ -143,7 +143,8 @@ class RegistrationConfig(Config):
             cells along the longer side at most. verify_turns: turns per principal axis (k x 360 /
             verify_turns degrees; 0 or 1: none). verify_extra: further bases (the colour search's
             other basins) at most. verify_icp: hypotheses ICP'd at most. verify_margin: score lead of
-            the best hypothesis over the second above which only it is ICP'd.
+            the best hypothesis over the second above which only it is ICP'd. verify_min_gain: score
+            lead over the input pose another hypothesis needs to replace it.
         seed: random seed of the run (RANSAC, FGR, Super4PCS and the colour search); each instance
             uses its own seed derived from it (:func:`~sixdpose.registration.runner.instance_seed`).
     """
@@ -206,6 +207,7 @@ class RegistrationConfig(Config):
     verify_extra: int = bounded(3, min=0, max=1000)
     verify_icp: int = bounded(3, min=1, max=1000)
     verify_margin: float = bounded(0.1, min=0, max=10)
+    verify_min_gain: float = bounded(0.02, min=0, max=10)
     seed: int = bounded(0, min=0, max=2**32 - 1)
 
     def validate(self) -> None:
