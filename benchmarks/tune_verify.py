@@ -14,8 +14,6 @@ import argparse
 import dataclasses
 import time
 
-import numpy as np
-
 from sixdpose.datasets.readers import open_dataset
 from sixdpose.evaluation.metrics import add_or_adds
 from sixdpose.registration import hypotheses as H

@@ -207,7 +207,7 @@ class RegistrationConfig(Config):
     verify_extra: int = bounded(3, min=0, max=1000)
     verify_icp: int = bounded(3, min=1, max=1000)
     verify_margin: float = bounded(0.1, min=0, max=10)
-    verify_min_gain: float = bounded(0.02, min=0, max=10)
+    verify_min_gain: float = bounded(0.03, min=0, max=10)
     seed: int = bounded(0, min=0, max=2**32 - 1)
 
     def validate(self) -> None:
