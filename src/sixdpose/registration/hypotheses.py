@@ -18,9 +18,11 @@ visible samples and the observed depth ``D`` at their pixels (``tau = verify_tau
   model would hide what the camera sees), one behind it is *occluded*, not wrong (left out, also from
   the silhouette). ``depth = agree / (agree + wrong)``.
 * **mask**: IoU of the projected silhouette (visible, not occluded cells) with the instance mask's cells.
-* **texture**: over the agreeing samples inside the mask, the mean of the normalised cross-correlation of
-  grey values and of the centred correlation of chromaticity (model vertex colours against the frame's
-  pixels): both insensitive to the gain and offset of the lighting.
+* **texture**: over the agreeing samples inside the mask, the centred correlation of chromaticity
+  (``rgb / (r + g + b)``: insensitive to shading and to the light's gain) of the model's vertex colours
+  against the frame's pixels, blended with the normalised cross-correlation of grey values by
+  ``verify_grey_share`` (default 0: grey follows the shading, which the model's colours do not hold,
+  and on the real sample it preferred a flipped mustard bottle).
 
 ``score = (w_depth * depth + w_mask * iou + w_tex * texture) / (w_depth + w_mask + w_tex)`` (texture in
 [-1, 1], the rest in [0, 1]). A model without colours is scored on depth and mask alone (logged once).
@@ -338,7 +340,8 @@ def score_hypotheses(Xs: np.ndarray, surface: Surface, frame: Frame, cfg: Regist
         n = np.maximum(out[:, 5], 1.0)
         ncc_g = _corr_from_sums(n, out[:, 6:7], out[:, 7:8], out[:, 8], out[:, 9], out[:, 10])
         ncc_c = _corr_from_sums(n, out[:, 11:14], out[:, 14:17], out[:, 17], out[:, 18], out[:, 19])
-        texture = np.where(out[:, 5] >= 3, 0.5 * (ncc_g + ncc_c), 0.0)
+        share = cfg.verify_grey_share
+        texture = np.where(out[:, 5] >= 3, share * ncc_g + (1.0 - share) * ncc_c, 0.0)
     wd, wm, wt = cfg.verify_w_depth, cfg.verify_w_mask, (cfg.verify_w_texture if textured else 0.0)
     score = (wd * depth_s + wm * iou + wt * texture) / max(wd + wm + wt, 1e-12)
     score = np.where(n_vis > 0, score, -1.0)
