@@ -124,7 +124,7 @@ def model_surface(cache: ReferenceCache, obj_id: int, cfg: RegistrationConfig) -
 
     key = ("surface", int(obj_id), float(cfg.verify_voxel_rel))
     hit = cache.extra.get(key)
-    if hit is not None:
+    if isinstance(hit, Surface):
         return hit, 0.0
     t0 = time.perf_counter()
     model = cache.dataset.model(obj_id)
@@ -318,7 +318,9 @@ def score_hypotheses(Xs: np.ndarray, surface: Surface, frame: Frame, cfg: Regist
     mcell = np.zeros(G, dtype=np.bool_)
     mcell[(mv // cell) * gw + mu // cell] = True
     textured = surface.grey is not None and frame.rgb is not None
-    rgb = frame.rgb if textured else np.zeros((1, 1, 3), np.uint8)
+    rgb = np.zeros((1, 1, 3), np.uint8)
+    if textured and frame.rgb is not None:
+        rgb = frame.rgb
     if rgb.dtype != np.uint8:
         rgb = np.clip(np.asarray(rgb) * 255.0 + 0.5, 0, 255).astype(np.uint8)
     f4 = np.float32

@@ -286,9 +286,14 @@ def refine_pose(
         from .hypotheses import model_surface, verify_hypotheses
 
         surf, _ = model_surface(cache, obj_id, cfg)
-        v = verify_hypotheses(X_CO, surf, frame, cfg, extra=extra,
-                              icp=(lambda X: refine_icp(scene, ref, X, cfg).X_CO) if can_icp else None,
-                              obj_id=obj_id)
+        icp_fn = None
+        if can_icp and scene is not None:
+            scene_c, ref_c = scene, ref
+
+            def icp_fn(X: np.ndarray) -> np.ndarray:
+                return refine_icp(scene_c, ref_c, X, cfg).X_CO
+
+        v = verify_hypotheses(X_CO, surf, frame, cfg, extra=extra, icp=icp_fn, obj_id=obj_id)
         X_CO, score = v.X_CO, max(v.score, 0.0)
         info.update(verify_index=v.index, verify_hypotheses=v.n_hypotheses, verify_icp=v.n_icp)
     return Registration(X_CO, score, time.perf_counter() - t0, info)
