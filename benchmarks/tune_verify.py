@@ -81,7 +81,8 @@ def main() -> None:
                 for kv in filter(None, spec.split(",")):
                     f, val = kv.split("=")
                     typ = type(getattr(cfg0, f))
-                    ov[f] = typ(float(val)) if typ is int else typ(val)
+                    ov[f] = (val.lower() in ("1", "true")) if typ is bool else (
+                        typ(float(val)) if typ is int else typ(val))
                 cfg = dataclasses.replace(cfg0, **ov)
                 surf, _ = H.model_surface(cache, oid, cfg)
                 t0 = time.perf_counter()

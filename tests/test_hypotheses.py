@@ -158,3 +158,12 @@ def test_empty_mask_is_an_error():
     frame.mask[:] = False
     with pytest.raises(ValueError, match="empty instance mask"):
         H.score_hypotheses(X(R_TRUE)[None], surface(), frame, CFG)
+
+
+def test_recentred_moves_a_hypothesis_onto_the_observed_cloud():
+    X_true = X(R_TRUE)
+    frame = render(X_true)
+    off = X(R_TRUE, (0.05, -0.03, 0.52))
+    back = H.recentred(off[None], surface(), frame)[0]
+    assert np.allclose(back[:3, :3], R_TRUE)
+    assert np.linalg.norm(back[:3, 3] - X_true[:3, 3]) < 0.005 < np.linalg.norm(off[:3, 3] - X_true[:3, 3])

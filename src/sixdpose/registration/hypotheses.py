@@ -350,6 +350,27 @@ def score_hypotheses(Xs: np.ndarray, surface: Surface, frame: Frame, cfg: Regist
     return Scores(score, depth_s, iou, texture, n_vis, textured)
 
 
+def recentred(Xs: np.ndarray, surface: Surface, frame: Frame) -> np.ndarray:
+    """Copies of the poses ``Xs`` (H, 4, 4) moved so that the centroid of their camera-facing samples
+    lies on the centroid of the observed masked cloud (a turned hypothesis keeps the model's centroid,
+    which for a partial view is often centimetres from where the turned model fits, beyond ICP's reach).
+    """
+    from ..datasets.geometry import backproject
+
+    obs, _, _ = backproject(frame.depth, frame.K, frame.mask, None)
+    if len(obs) == 0:
+        return Xs[:0]
+    c_obs = obs.mean(axis=0)
+    R, t = Xs[:, :3, :3], Xs[:, :3, 3]
+    P = np.matmul(surface.points, R.transpose(0, 2, 1)) + t[:, None, :]
+    front = (np.matmul(surface.normals, R.transpose(0, 2, 1)) * P).sum(axis=2) < 0
+    n = np.maximum(front.sum(axis=1), 1)[:, None]
+    c_front = (P * front[..., None]).sum(axis=1) / n
+    out = Xs.copy()
+    out[:, :3, 3] += c_obs - c_front
+    return out
+
+
 @dataclass
 class Verified:
     """Output of :func:`verify_hypotheses`: the kept pose ``X_CO`` (4, 4), its ``score`` (in [-1, 1]),
@@ -392,6 +413,8 @@ def verify_hypotheses(
         bases += [np.asarray(e, dtype=np.float64) for e in extra]
     T = turns(surface, cfg.verify_turns) if cfg.verify_turns > 1 else np.eye(4)[None]
     Xs = np.einsum("bij,tjk->btik", np.stack(bases), T).reshape(-1, 4, 4)
+    if cfg.verify_recentre:
+        Xs = np.concatenate([Xs, recentred(Xs[1:], surface, frame)])
     sc = score_hypotheses(Xs, surface, frame, cfg)
     if not sc.textured and surface.grey is None and obj_id not in _TEXTURELESS_LOGGED:
         _TEXTURELESS_LOGGED.add(obj_id)

@@ -145,7 +145,8 @@ class RegistrationConfig(Config):
             other basins) at most. verify_icp: hypotheses ICP'd at most. verify_margin: score lead of
             the best hypothesis over the second above which only it is ICP'd. verify_min_gain: score
             lead over the input pose another hypothesis needs to replace it. verify_grey_share: share of
-            the grey NCC in the texture term (the rest: chromaticity correlation).
+            the grey NCC in the texture term (the rest: chromaticity correlation). verify_recentre: also
+            score every turned hypothesis moved onto the observed cloud's centroid.
         seed: random seed of the run (RANSAC, FGR, Super4PCS and the colour search); each instance
             uses its own seed derived from it (:func:`~sixdpose.registration.runner.instance_seed`).
     """
@@ -210,6 +211,7 @@ class RegistrationConfig(Config):
     verify_margin: float = bounded(0.1, min=0, max=10)
     verify_min_gain: float = bounded(0.03, min=0, max=10)
     verify_grey_share: float = bounded(0.0, min=0, max=1)
+    verify_recentre: bool = False
     seed: int = bounded(0, min=0, max=2**32 - 1)
 
     def validate(self) -> None:
