@@ -276,7 +276,10 @@ def _corr_from_sums(n, sa, sb, saa, sbb, sab):
     ca = saa - (sa * sa).sum(axis=-1) / n
     cb = sbb - (sb * sb).sum(axis=-1) / n
     cab = sab - (sa * sb).sum(axis=-1) / n
-    return cab / (np.sqrt(np.maximum(ca, 0) * np.maximum(cb, 0)) + 1e-12)
+    # a flat colour on either side (variance lost in rounding): no evidence, correlation 0
+    flat = (ca <= 1e-6 * n) | (cb <= 1e-6 * n)
+    r = cab / np.sqrt(np.where(flat, 1.0, ca * cb))
+    return np.where(flat, 0.0, np.clip(r, -1.0, 1.0))
 
 
 def warmup() -> None:
