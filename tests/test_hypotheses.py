@@ -187,3 +187,18 @@ def test_register_verify_end_to_end(tmp_path):
     assert res.n_gt == 4 and res.accuracy == 100.0
     assert all(0 < e.score <= 1 for e in ests)
     assert "verify: true" in out.with_name("r.config.yml").read_text()
+
+
+def test_local_search_moves_toward_the_true_pose():
+    import dataclasses
+
+    from sixdpose.evaluation.metrics import rotation_error
+
+    X_true = X(R_TRUE)
+    frame = render(X_true)
+    off = X_true @ X(rot(2, 20), (0, 0, 0))
+    cfg = dataclasses.replace(CFG, verify_search_rounds=3)
+    s0 = H.score_hypotheses(off[None], surface(), frame, cfg).score
+    Xb, sb = H.local_search(off[None], s0, surface(), frame, cfg)
+    assert sb[0] > s0[0]
+    assert rotation_error(Xb[0, :3, :3], R_TRUE) < 10.0 < rotation_error(off[:3, :3], R_TRUE)

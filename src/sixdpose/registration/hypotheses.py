@@ -374,6 +374,34 @@ def recentred(Xs: np.ndarray, surface: Surface, frame: Frame) -> np.ndarray:
     return out
 
 
+def local_search(Xs: np.ndarray, scores: np.ndarray, surface: Surface, frame: Frame, cfg: RegistrationConfig,
+                 seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Improve poses ``Xs`` (H, 4, 4) of scores ``scores`` (H,) by rotations about the model's centroid:
+    ``verify_search_rounds`` rounds of ``verify_search_n`` random rotations of at most
+    ``verify_search_deg`` degrees (halved each round) per pose, each also recentred on the observed
+    cloud (:func:`recentred`); a pose moves when a trial scores higher. Returns ``(poses, scores)``."""
+    from .verify import _small_rotations
+
+    rng = np.random.default_rng(seed)
+    Xs, scores = Xs.copy(), np.asarray(scores, dtype=np.float64).copy()
+    c = surface.centroid
+    ang = cfg.verify_search_deg
+    n = cfg.verify_search_n
+    for _ in range(cfg.verify_search_rounds):
+        S = _small_rotations(n, ang, rng)
+        X_ON = np.stack([X_from(Si, c - Si @ c) for Si in S])
+        trial = np.einsum("hij,njk->hnik", Xs, X_ON).reshape(-1, 4, 4)
+        trial = np.concatenate([trial, recentred(trial, surface, frame)])
+        st = score_hypotheses(trial, surface, frame, cfg).score.reshape(2, len(Xs), n)
+        trial = trial.reshape(2, len(Xs), n, 4, 4)
+        for h in range(len(Xs)):
+            a, j = np.unravel_index(int(np.argmax(st[:, h])), (2, n))
+            if st[a, h, j] > scores[h]:
+                Xs[h], scores[h] = trial[a, h, j], st[a, h, j]
+        ang /= 2.0
+    return Xs, scores
+
+
 @dataclass
 class Verified:
     """Output of :func:`verify_hypotheses`: the kept pose ``X_CO`` (4, 4), its ``score`` (in [-1, 1]),
@@ -423,6 +451,11 @@ def verify_hypotheses(
         _TEXTURELESS_LOGGED.add(obj_id)
         log.warning("object %s: model without colours, hypotheses verified on depth and mask alone", obj_id)
     order = np.argsort(-sc.score, kind="stable")
+    if cfg.verify_search_rounds > 0:
+        Xs, score = Xs.copy(), sc.score.copy()
+        top = order[: cfg.verify_icp]
+        Xs[top], score[top] = local_search(Xs[top], score[top], surface, frame, cfg)
+        order = np.argsort(-score, kind="stable")
     n_icp = 0
     best_i, best_X, best_s = int(order[0]), Xs[order[0]], float(sc.score[order[0]])
     if icp is not None:

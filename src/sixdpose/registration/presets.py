@@ -147,6 +147,9 @@ class RegistrationConfig(Config):
             lead over the input pose another hypothesis needs to replace it. verify_grey_share: share of
             the grey NCC in the texture term (the rest: chromaticity correlation). verify_recentre: also
             score every turned hypothesis moved onto the observed cloud's centroid.
+            verify_search_rounds, verify_search_n, verify_search_deg: local search of the best
+            ``verify_icp`` hypotheses before ICP (:func:`~sixdpose.registration.hypotheses.local_search`;
+            0 rounds: none).
         seed: random seed of the run (RANSAC, FGR, Super4PCS and the colour search); each instance
             uses its own seed derived from it (:func:`~sixdpose.registration.runner.instance_seed`).
     """
@@ -212,6 +215,9 @@ class RegistrationConfig(Config):
     verify_min_gain: float = bounded(0.03, min=0, max=10)
     verify_grey_share: float = bounded(0.0, min=0, max=1)
     verify_recentre: bool = False
+    verify_search_rounds: int = bounded(0, min=0, max=100)
+    verify_search_n: int = bounded(32, min=1, max=100_000)
+    verify_search_deg: float = bounded(30.0, min=0, max=180, min_open=True)
     seed: int = bounded(0, min=0, max=2**32 - 1)
 
     def validate(self) -> None:
