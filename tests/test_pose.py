@@ -427,6 +427,12 @@ def test_icp_colour_rows_and_predicted_masks(smoke_run, pose_ds, tmp_path):
     rows = read_results(out)
     assert len(rows) == 4 and all(r.score == pytest.approx(0.9) for r in rows)
     assert evaluate(reader, rows, min_px=0).accuracy >= 75.0
+    # the hybrid stage's hypothesis verification after the network (predict-pose --verify)
+    out_v = tmp_path / "verify.csv"
+    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(smoke_run), "--masks", str(pred), "--icp",
+                 "--colour-verify", "--verify", "--out", str(out_v), "--no-progress"]) == 0
+    assert evaluate(reader, read_results(out_v), min_px=0).accuracy >= 75.0
+    assert "verify: true" in out_v.with_name("verify.config.yml").read_text()
     (pred / "0_0.npz").write_bytes(b"")  # an empty prediction file: one line naming it
     assert (
         main(

@@ -221,6 +221,9 @@ OPTIONS: dict[str, Opt] = {o.flag: o for o in (
         type=Int(1, MAX_BATCH), default=None),
     Opt("--val", "val", "held-out dataset scored every epoch (ADD(-S) %% into metrics.csv), e.g. data/val",
         default=None),
+    Opt("--verify", "verify", "verify several pose hypotheses per instance against the frame (depth with "
+        "occlusion, mask overlap, texture; sixdpose.registration.hypotheses) and keep the best", action="store_true",
+        default=False),
     Opt("--pose", "pose", "run directory of train-pose", required=True),
     Opt("--seg", "ckpt", "run directory of train-seg (or a checkpoint file)", required=True, aliases=("--ckpt",)),
 )}

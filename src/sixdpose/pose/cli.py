@@ -87,6 +87,7 @@ def _cmd_predict(args) -> int:
         iterations=args.iterations,
         icp=args.icp,
         colour_verify=args.colour_verify,
+        verify=args.verify,
         device=args.device,
         split=args.split,
         limit=args.limit,
@@ -204,6 +205,7 @@ def register(subparsers) -> None:
     p.add_argument("--icp", action="store_true", help="refine every pose with Open3D ICP (the hybrid stage's)")
     p.add_argument("--colour-verify", dest="colour_verify", action="store_true",
                    help="then run the hybrid stage's colour verification")
+    O.add(p, "--verify")
     O.add(p, "--split")
     O.add(p, "--limit")
     O.add(p, "--out", help="results CSV to write")

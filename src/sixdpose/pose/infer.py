@@ -110,6 +110,9 @@ class Estimator:
         iterations: refinement iterations (default: the refiner's training value; 0 = none).
         device: ``cpu``/``cuda``/None (GPU when present). icp: refine each pose with Open3D ICP.
         colour_verify: run the hybrid stage's colour verification on each pose.
+        verify: verify each pose's hypotheses against the frame (the hybrid stage's
+            :mod:`~sixdpose.registration.hypotheses`, ``predict-pose --verify``; with ``icp`` the best few
+            are ICP'd).
         reader: the dataset reader (its models are needed by ``icp`` / ``colour_verify``).
         score_thresh: predicted masks below this score are ignored. seed: point-sampling seed.
         max_batch: most instances per forward pass (crop mode).
@@ -122,7 +125,7 @@ class Estimator:
     def __init__(self, pose, refiner=None, *, iterations: int | None = None, device: str | None = None,
                  icp: bool = False, colour_verify: bool = False, reader=None,
                  score_thresh: float = MIN_DETECTION_SCORE, seed: int = 0, max_batch: int = 64,
-                 overrides: dict | None = None):
+                 overrides: dict | None = None, verify: bool = False):
         from ..runs import pick_device
 
         dev = pick_device(device)  # auto / None: the GPU when present
@@ -135,7 +138,7 @@ class Estimator:
             refiner_ckpt = ck.load(refiner, kind="refiner")
             ref_net, ref_cfg = load_refiner(refiner_ckpt, pose_ckpt, dev)
         self._setup(net, cfg, ck.classes_of(pose_ckpt), ref_net, ref_cfg, dev, iterations, icp, colour_verify, reader,
-                    score_thresh, seed, max_batch)
+                    score_thresh, seed, max_batch, verify=verify)
         self.pose_ckpt, self.refiner_ckpt = pose_ckpt, refiner_ckpt
 
     @classmethod
@@ -156,7 +159,7 @@ class Estimator:
         return est
 
     def _setup(self, net, cfg, classes, refiner, refiner_cfg, device, iterations, icp, colour_verify, reader,
-               score_thresh, seed, max_batch) -> None:
+               score_thresh, seed, max_batch, verify: bool = False) -> None:
         """Every attribute of an estimator but the checkpoints (shared by both constructors)."""
         self.device, self.net, self.cfg = device, net, cfg
         self.classes = [tuple(c) for c in classes]
@@ -174,16 +177,16 @@ class Estimator:
         # classes the network saw no training instance of (a count of -1: unknown, predicted as before)
         seen = getattr(net, "seen", None)
         self.unseen = {int(c[0]) for k, c in enumerate(self.classes) if seen is not None and float(seen[k]) == 0}
-        self.icp, self.colour_verify, self.reader = icp, colour_verify, reader
+        self.icp, self.colour_verify, self.verify, self.reader = icp, colour_verify, verify, reader
         self._diameters: dict[int, float] = {}
         self.score_thresh, self.seed, self.max_batch = score_thresh, seed, max_batch
         self._cache = None
-        if icp or colour_verify:
+        if icp or colour_verify or verify:
             if reader is None:
                 raise PoseError("ICP and colour verification need the dataset reader (its object models)")
             from ..registration import ReferenceCache, get_preset
 
-            self.reg_cfg = get_preset("default")
+            self.reg_cfg = get_preset("default", verify=verify)
             self._cache = ReferenceCache(reader)
 
     def settings(self) -> dict:
@@ -193,6 +196,7 @@ class Estimator:
             "refiner_run": self.refiner_ckpt["path"] if self.refiner_ckpt else None,
             "refiner_config": self.refiner_cfg.to_dict() if self.refiner_cfg else None,
             "iterations": self.iterations, "icp": self.icp, "colour_verify": self.colour_verify,
+            "verify": self.verify,
             "score_thresh": self.score_thresh, "seed": self.seed, "device": str(self.device),
         }
 
@@ -220,7 +224,7 @@ class Estimator:
         else:
             items = [(d.obj_id, d.score, d.mask) for d in detections if d.score >= self.score_thresh]
         rng = np.random.default_rng([self.seed, int(sample.scene_id), int(sample.im_id)])
-        keep_points = self.icp or self.colour_verify
+        keep_points = self.icp or self.colour_verify or self.verify
         rows: list[PoseEstimate | None] = [None] * len(items)
         usable = []
         for k, (oid, score, mask) in enumerate(items):
@@ -255,7 +259,7 @@ class Estimator:
                 R, t = run_networks(self.net, self.refiner, batch, self.iterations, self.device, amp=True)
             for inst, Ri, ti in zip(chunk, R, t, strict=True):
                 Ri = _orthonormalise(Ri)
-                Ri, ti = self._post(inst, Ri, ti)
+                Ri, ti = self._post(inst, Ri, ti, sample, items[inst.index][2])
                 rows[inst.index] = PoseEstimate(sample.scene_id, sample.im_id, inst.obj_id, inst.score, Ri, ti)
         dt = time.perf_counter() - t0
         for r in rows:
@@ -296,27 +300,31 @@ class Estimator:
                 self._diameters[obj_id] = 0.0
         return self._diameters[obj_id]
 
-    def _post(self, inst, R, t):
-        """Optional ICP and colour verification of one pose: the hybrid stage's refinement chain
-        (:func:`sixdpose.registration.refine_pose`, ``default`` preset)."""
-        if not (self.icp or self.colour_verify):
+    def _post(self, inst, R, t, sample=None, mask=None):
+        """Optional ICP, colour check and hypothesis verification of one pose: the hybrid stage's
+        refinement chain (:func:`sixdpose.registration.refine_pose`, ``default`` preset); ``sample`` and
+        the instance's ``mask`` are the frame of the verification."""
+        if not (self.icp or self.colour_verify or self.verify):
             return R, t
-        from ..registration import refine_pose
+        from ..registration import Frame, refine_pose
 
+        frame = Frame(sample.depth, sample.K, np.asarray(mask, dtype=bool), sample.rgb) if (
+            self.verify and sample is not None and mask is not None) else None
         r = refine_pose(X_from(R, t), inst.points, inst.obj_id, self._cache, self.reg_cfg, icp=self.icp,
-                        colour_verify=self.colour_verify, colors=inst.colors)
+                        colour_verify=self.colour_verify, colors=inst.colors, frame=frame)
         return r.X_CO[:3, :3], r.X_CO[:3, 3]
 
 
 def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: int | None = None,
-                    icp: bool = False, colour_verify: bool = False, device: str | None = None, split: str = "test",
+                    icp: bool = False, colour_verify: bool = False, verify: bool = False, device: str | None = None,
+                    split: str = "test",
                     limit: int = 0, score_thresh: float = MIN_DETECTION_SCORE, progress: bool = False,
                     estimator: Estimator | None = None, indices=None,
                     overrides: dict | None = None) -> tuple[list[PoseEstimate], Estimator]:
     """Estimate poses on every image of a dataset (disk reads are not timed).
 
     Args:
-        data: a DatasetReader or a dataset path. pose, refiner, iterations, icp, colour_verify, device,
+        data: a DatasetReader or a dataset path. pose, refiner, iterations, icp, colour_verify, verify, device,
             score_thresh: see :class:`Estimator`. masks: ``"gt"`` or a prediction directory of
             ``sixdpose segment``. split: BOP split. limit: first N images only (0: all).
             indices: positions in ``reader.keys()`` of the images to predict (None: ``limit`` decides).
@@ -332,7 +340,7 @@ def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: 
     reader = as_reader(data, split=split)
     est = estimator or Estimator(pose, refiner, iterations=iterations, device=device, icp=icp,
                                  colour_verify=colour_verify, reader=reader, score_thresh=score_thresh,
-                                 overrides=overrides)
+                                 overrides=overrides, verify=verify)
     if masks != "gt" and not Path(masks).is_dir():
         raise PoseError(f"{masks}: prediction directory not found (use --masks gt for ground-truth masks)")
     if masks != "gt":

@@ -30,6 +30,7 @@ def register(sub) -> None:
     p.add_argument("--stride", type=O.Int(1, 1_000_000), default=1,
                    help="only every N-th image (a fixed subset spread over the scenes)")
     O.add(p, "--min-px")
+    O.add(p, "--verify")
     O.add(
         p,
         "--score-thresh",
@@ -53,6 +54,8 @@ def _run(args) -> int:
     overrides = parse_overrides(args.overrides)
     if args.seed is not None:
         overrides["seed"] = args.seed
+    if args.verify:
+        overrides["verify"] = True
     cfg = get_preset(args.profile, **overrides)
     out = Path(args.out)
     claim_output_file(out, RESULTS_HEADER)  # refuse a foreign file before any work

@@ -175,6 +175,8 @@ class ReferenceCache:
         self.dataset = dataset
         self._refs: dict[tuple, Reference] = {}
         self._grids: dict[tuple, object] = {}
+        #: other per-object data of the stage (verification surfaces), keyed by the module that builds it
+        self.extra: dict[tuple, object] = {}
 
     def colour_grid(self, obj_id: int, cells: int, smooth_rel: float):
         """The :class:`~sixdpose.registration.verify.ColourGrid` of ``obj_id`` (None if the model has no

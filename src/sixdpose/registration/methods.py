@@ -227,6 +227,7 @@ def refine_pose(
     score: float = 0.0,
     scene: SceneCloud | None = None,
     ref: Reference | None = None,
+    frame=None,
 ) -> Registration:
     """The refinement chain of section IV-B after any first pose: ICP -> colour check -> ICP again.
 
@@ -245,6 +246,10 @@ def refine_pose(
         icp, colour_verify: which steps run. score: the score of ``X_CO`` (kept when ICP does not run).
         scene, ref: the prepared scene cloud and reference when the caller has them (else built here:
             the ``icp`` reference, a scene without features).
+        frame: the instance's :class:`~sixdpose.registration.hypotheses.Frame`; with ``cfg.verify`` the
+            pose, the colour search's other basins and their turns are verified against it
+            (:func:`~sixdpose.registration.hypotheses.verify_hypotheses`, ICP on the best few) and the
+            verification score becomes the score.
     Returns:
         :class:`Registration` with the refined ``X_CO``, the last ICP fitness (or ``score``), the
         seconds of this chain (including a scene or reference built here and the colour grid's first
@@ -260,6 +265,7 @@ def refine_pose(
     if can_icp:
         r = refine_icp(scene, ref, X_CO, cfg)
         X_CO, score = r.X_CO, r.score
+    extra = None
     if colour_verify and colors is not None and len(colors) == len(points):
         grid, _ = cache.colour_grid(obj_id, cfg.cv_grid_cells, cfg.cv_smooth_rel)
         if grid is not None:
@@ -267,11 +273,29 @@ def refine_pose(
 
             res = colour_search(X_CO, points, colors, grid, ref.diameter, cfg)
             info.update(colour_changed=res.changed, colour_corr=res.col)
+            if res.candidates is not None:
+                extra = res.candidates[: cfg.verify_extra]
             if res.changed:
+                if extra is not None:  # the geometric pose becomes a further base of the verification
+                    extra = np.concatenate([X_CO[None], extra])[: max(cfg.verify_extra, 1)]
                 X_CO = res.X_CO
                 if can_icp:
                     r = refine_icp(scene, ref, X_CO, cfg)
                     X_CO, score = r.X_CO, r.score
+    if cfg.verify and frame is not None:
+        from .hypotheses import model_surface, verify_hypotheses
+
+        surf, _ = model_surface(cache, obj_id, cfg)
+        icp_fn = None
+        if can_icp and scene is not None:
+            scene_c, ref_c = scene, ref
+
+            def icp_fn(X: np.ndarray) -> np.ndarray:
+                return refine_icp(scene_c, ref_c, X, cfg).X_CO
+
+        v = verify_hypotheses(X_CO, surf, frame, cfg, extra=extra, icp=icp_fn, obj_id=obj_id)
+        X_CO, score = v.X_CO, max(v.score, 0.0)
+        info.update(verify_index=v.index, verify_hypotheses=v.n_hypotheses, verify_icp=v.n_icp)
     return Registration(X_CO, score, time.perf_counter() - t0, info)
 
 
@@ -283,6 +307,7 @@ def estimate_pose(
     cfg: RegistrationConfig,
     icp: bool = False,
     colors: np.ndarray | None = None,
+    frame=None,
 ) -> Registration:
     """Full per-instance pipeline: scene preparation, global registration, optional ICP.
 
@@ -294,6 +319,8 @@ def estimate_pose(
         cfg: configuration. icp: refine with ICP.
         colors: optional (N, 3) colours in [0, 1] of ``points``; with ``cfg.colour_verify`` (and a
             coloured model) the pose is then checked by colour and refined again (:func:`refine_pose`).
+        frame: optional :class:`~sixdpose.registration.hypotheses.Frame` of the instance (hypothesis
+            verification with ``cfg.verify``).
     Returns:
         :class:`Registration` whose ``time`` includes scene preparation, the first-use cost of the
         model's reference (charged once per process), the method and ICP.
@@ -306,6 +333,6 @@ def estimate_pose(
         return Registration(np.eye(4), 0.0, scene.time + t_ref, {"reason": "fewer than 3 points after gating"})
     est = _FUNCS[method](scene, ref, cfg)
     r = refine_pose(est.X_CO, points, obj_id, cache, cfg, icp=icp, colour_verify=cfg.colour_verify, colors=colors,
-                    score=est.score, scene=scene, ref=ref)
+                    score=est.score, scene=scene, ref=ref, frame=frame)
     info = dict(est.info, global_score=est.score, n_scene=len(scene.points), **r.info)
     return Registration(r.X_CO, r.score, t_ref + scene.time + est.time + r.time, info)

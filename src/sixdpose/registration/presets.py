@@ -136,6 +136,20 @@ class RegistrationConfig(Config):
         the colour search (each described at :func:`~sixdpose.registration.verify.colour_search`).
         cv_grid_cells: cells along the longest side of the per-object colour grid
         (:func:`~sixdpose.registration.verify.build_grid`).
+        verify: hypothesis verification against the frame (:mod:`~sixdpose.registration.hypotheses`,
+            ``register --verify``) after the chain above. verify_voxel_rel: surface sample spacing /
+            diameter. verify_tau_rel: depth tolerance / diameter. verify_w_depth, verify_w_mask,
+            verify_w_texture: weights of the depth, mask-IoU and texture terms. verify_max_cells: grid
+            cells along the longer side at most. verify_turns: turns per principal axis (k x 360 /
+            verify_turns degrees; 0 or 1: none). verify_extra: further bases (the colour search's
+            other basins) at most. verify_icp: hypotheses ICP'd at most. verify_margin: score lead of
+            the best hypothesis over the second above which only it is ICP'd. verify_min_gain: score
+            lead over the input pose another hypothesis needs to replace it. verify_grey_share: share of
+            the grey NCC in the texture term (the rest: chromaticity correlation). verify_recentre: also
+            score every turned hypothesis moved onto the observed cloud's centroid.
+            verify_search_rounds, verify_search_n, verify_search_deg: local search of the best
+            ``verify_icp`` hypotheses before ICP (:func:`~sixdpose.registration.hypotheses.local_search`;
+            0 rounds: none).
         seed: random seed of the run (RANSAC, FGR, Super4PCS and the colour search); each instance
             uses its own seed derived from it (:func:`~sixdpose.registration.runner.instance_seed`).
     """
@@ -187,6 +201,23 @@ class RegistrationConfig(Config):
     cv_min_gain: float = bounded(0.02, min=-1, max=1)
     cv_nms_deg: float = bounded(30.0, min=0, max=180)
     cv_grid_cells: int = bounded(64, min=1, max=4096)
+    verify: bool = False
+    verify_voxel_rel: float = bounded(0.015, min=0, max=1, min_open=True)
+    verify_tau_rel: float = bounded(0.03, min=0, max=10, min_open=True)
+    verify_w_depth: float = bounded(1.0, min=0, max=1000)
+    verify_w_mask: float = bounded(1.0, min=0, max=1000)
+    verify_w_texture: float = bounded(1.0, min=0, max=1000)
+    verify_max_cells: int = bounded(96, min=4, max=4096)
+    verify_turns: int = bounded(4, min=0, max=360)
+    verify_extra: int = bounded(3, min=0, max=1000)
+    verify_icp: int = bounded(3, min=1, max=1000)
+    verify_margin: float = bounded(0.1, min=0, max=10)
+    verify_min_gain: float = bounded(0.03, min=0, max=10)
+    verify_grey_share: float = bounded(0.0, min=0, max=1)
+    verify_recentre: bool = False
+    verify_search_rounds: int = bounded(0, min=0, max=100)
+    verify_search_n: int = bounded(32, min=1, max=100_000)
+    verify_search_deg: float = bounded(30.0, min=0, max=180, min_open=True)
     seed: int = bounded(0, min=0, max=2**32 - 1)
 
     def validate(self) -> None:

@@ -114,6 +114,10 @@ def _init_worker(ds: DatasetReader, method: str, icp: bool, cfg: RegistrationCon
         from .verify import warmup
 
         warmup()  # compile (or load from the on-disk cache) the Numba kernel now: a start-up cost, like imports
+    if _W["cfg"].verify:
+        from .hypotheses import warmup as warmup_verify
+
+        warmup_verify()
 
 
 def process_image(index: int) -> tuple[list[PoseEstimate], tuple | None]:
@@ -175,12 +179,18 @@ def process_image(index: int) -> tuple[list[PoseEstimate], tuple | None]:
             with warnings.catch_warnings(record=True) as caught, np.errstate(all="warn", under="ignore"):
                 warnings.simplefilter("always")
                 try:
-                    use_rgb = cfg.colour_verify and sample.rgb is not None and sample.rgb.shape[:2] == mask.shape
+                    rgb_ok = sample.rgb is not None and sample.rgb.shape[:2] == mask.shape
+                    use_rgb = cfg.colour_verify and rgb_ok
                     pts, col, _ = backproject(sample.depth, sample.K, mask, sample.rgb if use_rgb else None)
+                    frame = None
+                    if cfg.verify:
+                        from .hypotheses import Frame
+
+                        frame = Frame(sample.depth, sample.K, mask, sample.rgb if rgb_ok else None)
                     if len(pts) < 3:
                         reason = f"mask has {len(pts)} valid depth points (< 3)"
                     else:
-                        est = estimate_pose(pts, oid, method, cache, cfg_k, icp=icp, colors=col)
+                        est = estimate_pose(pts, oid, method, cache, cfg_k, icp=icp, colors=col, frame=frame)
                 except Exception as e:  # a numerical failure or unreadable model in one instance must not stop the run
                     error = e
             # a numeric warning (numpy's RuntimeWarning: division by zero, invalid value, ...) fails the

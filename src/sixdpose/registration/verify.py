@@ -230,12 +230,15 @@ def _corr(fs: np.ndarray, fm: np.ndarray) -> np.ndarray:
 
 @dataclass
 class SearchResult:
-    """Output of :func:`colour_search`: ``X_CO`` (4, 4), ``geo``, ``col`` (sharp), ``changed``."""
+    """Output of :func:`colour_search`: ``X_CO`` (4, 4), ``geo``, ``col`` (sharp), ``changed``;
+    ``candidates``: (k, 4, 4) the refined candidates (distinct basins), best first (hypotheses for
+    :mod:`~sixdpose.registration.hypotheses`), or None."""
 
     X_CO: np.ndarray
     geo: float
     col: float
     changed: bool
+    candidates: np.ndarray | None = None
 
 
 def colour_search(
@@ -352,9 +355,11 @@ def colour_search(
         best_s, _, _ = score(best, False, sigma)
     s0, g0, c0 = score(np.eye(3)[None], False, sigma)
     m = int(np.argmax(best_s))
+    order = np.argsort(-best_s, kind="stable")
+    cands = np.stack([X_CO @ X_from(best[i], c - best[i] @ c) for i in order])
     if best_s[m] <= s0[0] + min_gain:
-        return SearchResult(X_CO, float(g0[0]), float(c0[0]), False)
+        return SearchResult(X_CO, float(g0[0]), float(c0[0]), False, cands)
     Sb = best[m]
     X_ON = X_from(Sb, c - Sb @ c)  # the best candidate's object frame N in the object frame O
     _, gb, cb = score(Sb[None], False, sigma)
-    return SearchResult(X_CO @ X_ON, float(gb[0]), float(cb[0]), True)
+    return SearchResult(X_CO @ X_ON, float(gb[0]), float(cb[0]), True, cands)

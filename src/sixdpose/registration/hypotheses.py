@@ -1,0 +1,474 @@
+"""Hypothesis verification against the frame: several poses per instance, scored by projection.
+
+Global registration, ICP and the colour search each give one pose; on real frames the wrong one often
+fits the masked cloud as well as the right one (a turn about a near-symmetric axis that only the
+texture decides, a flip of a partly occluded object). :func:`verify_hypotheses` keeps several
+hypotheses per instance (the input pose, the colour search's other basins, the global method's, and
+their turns about the model's principal axes through its centroid), scores each against the frame
+without rendering but with occlusion reasoning, ICPs the best few and keeps the highest score.
+
+Scoring (:func:`score_hypotheses`), batched over hypotheses: the model's surface samples with normals
+(:class:`Surface`, cached per object) are posed, back-facing ones dropped, projected with the frame's
+``K`` into a grid of cells at the instance's bounding box (cell size about the projected sample spacing,
+so the splatted points leave no holes), and a z-buffer per hypothesis keeps the nearest samples. For the
+visible samples and the observed depth ``D`` at their pixels (``tau = verify_tau_rel * diameter``):
+
+* **depth** (VSD-style): inside the instance mask a sample agrees when ``|z - D| <= tau`` and is wrong
+  otherwise; outside the mask a sample in front of the observed surface (``z < D - tau``) is wrong (the
+  model would hide what the camera sees), one behind it is *occluded*, not wrong (left out, also from
+  the silhouette). ``depth = agree / (agree + wrong)``.
+* **mask**: IoU of the projected silhouette (visible, not occluded cells) with the instance mask's cells.
+* **texture**: over the agreeing samples inside the mask, the centred correlation of chromaticity
+  (``rgb / (r + g + b)``: insensitive to shading and to the light's gain) of the model's vertex colours
+  against the frame's pixels, blended with the normalised cross-correlation of grey values by
+  ``verify_grey_share`` (default 0: grey follows the shading, which the model's colours do not hold,
+  and on the real sample it preferred a flipped mustard bottle).
+
+``score = (w_depth * depth + w_mask * iou + w_tex * texture) / (w_depth + w_mask + w_tex)`` (texture in
+[-1, 1], the rest in [0, 1]). A model without colours is scored on depth and mask alone (logged once).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numba
+import numpy as np
+
+from ..geometry import X_from
+
+if TYPE_CHECKING:
+    from .geometry import ReferenceCache
+    from .presets import RegistrationConfig
+
+log = logging.getLogger(__name__)
+_TEXTURELESS_LOGGED: set = set()
+
+
+@dataclass
+class Frame:
+    """The frame an instance is verified against.
+
+    Attributes:
+        depth: (H, W) float depth in metres (0 or NaN: unknown). K: (3, 3) intrinsics.
+        mask: (H, W) bool instance mask. rgb: (H, W, 3) uint8 or float in [0, 1], or None.
+    """
+
+    depth: np.ndarray
+    K: np.ndarray
+    mask: np.ndarray
+    rgb: np.ndarray | None = None
+
+
+@dataclass
+class Surface:
+    """Model surface samples for verification (object frame, metres).
+
+    Attributes:
+        points, normals: (M, 3) uniform surface samples with outward unit normals. spacing: their
+        spacing (m). grey, chroma: (M,) grey values and (M, 3) chromaticities of the model's colours
+        at the samples, or None for a model without colours. axes: (3, 3) principal axes (columns).
+        centroid: (3,). diameter: metres.
+    """
+
+    points: np.ndarray
+    normals: np.ndarray
+    spacing: float
+    grey: np.ndarray | None
+    chroma: np.ndarray | None
+    axes: np.ndarray
+    centroid: np.ndarray
+    diameter: float
+
+    def __post_init__(self):
+        self._f32: dict = {}
+
+    def cast(self, name: str) -> np.ndarray:
+        """The attribute ``name`` as a contiguous float32 array (cached: the Numba kernel's input)."""
+        if name not in self._f32:
+            self._f32[name] = np.ascontiguousarray(getattr(self, name), dtype=np.float32)
+        return self._f32[name]
+
+
+def grey_of(rgb: np.ndarray) -> np.ndarray:
+    """Luma (Rec. 601) of (..., 3) colours in [0, 1] -> (...)."""
+    return rgb @ np.array([0.299, 0.587, 0.114])
+
+
+def build_surface(points: np.ndarray, normals: np.ndarray, spacing: float, diameter: float,
+                  model_points: np.ndarray | None = None, model_colors: np.ndarray | None = None) -> Surface:
+    """A :class:`Surface` from (M, 3) samples and normals (object frame, m) at ``spacing`` metres; the
+    colours (N, 3 in [0, 1]) of the model points ``model_points`` (N, 3) are read at the nearest one."""
+    from .verify import chroma
+
+    grey = ch = None
+    if model_colors is not None and model_points is not None and len(model_colors) == len(model_points):
+        from scipy.spatial import cKDTree
+
+        _, idx = cKDTree(model_points).query(points, k=1)
+        col = np.asarray(model_colors, dtype=np.float64)[idx]
+        grey, ch = grey_of(col), chroma(col)
+    c = points.mean(axis=0)
+    _, vecs = np.linalg.eigh(np.cov((points - c).T))
+    return Surface(np.asarray(points, np.float64), np.asarray(normals, np.float64), float(spacing), grey, ch,
+                   vecs[:, ::-1].copy(), c, float(diameter))
+
+
+def model_surface(cache: ReferenceCache, obj_id: int, cfg: RegistrationConfig) -> tuple[Surface, float]:
+    """The cached :class:`Surface` of ``obj_id`` (the registration reference at ``verify_voxel_rel`` x
+    the diameter, with the model's colours); returns ``(surface, seconds spent building it now)``."""
+    import time
+
+    key = ("surface", int(obj_id), float(cfg.verify_voxel_rel))
+    hit = cache.extra.get(key)
+    if isinstance(hit, Surface):
+        return hit, 0.0
+    t0 = time.perf_counter()
+    model = cache.dataset.model(obj_id)
+    spacing = cfg.verify_voxel_rel * model.diameter
+    ref, _ = cache.get(obj_id, spacing, None)
+    surf = build_surface(ref.points, ref.normals, spacing, model.diameter, model.points, model.colors)
+    cache.extra[key] = surf
+    return surf, time.perf_counter() - t0
+
+
+def turns(surface: Surface, n_turns: int) -> np.ndarray:
+    """Rigid motions ``X_ON`` (T, 4, 4) of the object frame: the identity, then the turns by ``k * 360 /
+    n_turns`` degrees (k = 1 .. n_turns - 1) about each principal axis through the centroid."""
+    from scipy.spatial.transform import Rotation
+
+    out = [np.eye(4)]
+    c = surface.centroid
+    for a in range(3):
+        for k in range(1, n_turns):
+            S = Rotation.from_rotvec(surface.axes[:, a] * (2 * math.pi * k / n_turns)).as_matrix()
+            out.append(X_from(S, c - S @ c))
+    return np.stack(out)
+
+
+@dataclass
+class Scores:
+    """Per-hypothesis terms of :func:`score_hypotheses`: ``score``, ``depth``, ``iou``, ``texture``,
+    ``n_visible`` (each (H,)); ``textured``: whether the texture term was used."""
+
+    score: np.ndarray
+    depth: np.ndarray
+    iou: np.ndarray
+    texture: np.ndarray
+    n_visible: np.ndarray
+    textured: bool
+
+
+@numba.njit(cache=True, fastmath=True, nogil=True)
+def _score_kernel(pts, nrm, grey, chrom, textured, Rs, ts, fx, fy, cx, cy, depth, mask, rgb, cell, gw, gh, mcell,
+                  tau, zbuf, sil, su, sv, sz, out):  # pragma: no cover - njit
+    """Per hypothesis ``h`` (pose ``Rs[h]``, ``ts[h]``): project the front-facing samples ``pts``
+    (normals ``nrm``) into the image's cell grid (``cell`` pixels, ``gw`` x ``gh``), keep the nearest
+    per cell (``zbuf``), then classify the visible samples against ``depth`` and ``mask`` and accumulate
+    into ``out[h]``: agree, wrong, visible, silhouette cells, silhouette & mask cells, then the texture
+    sums of the agreeing samples in the mask (n; grey: sum m, sum f, sum m^2, sum f^2, sum m f;
+    chromaticity: sum m (3), sum f (3), sum |m|^2, sum |f|^2, sum m . f)."""
+    N = pts.shape[0]
+    Hh, Ww = depth.shape
+    G = gw * gh
+    for h in range(Rs.shape[0]):
+        for g in range(G):
+            zbuf[g] = np.inf
+            sil[g] = False
+        for k in range(N):
+            x = Rs[h, 0, 0] * pts[k, 0] + Rs[h, 0, 1] * pts[k, 1] + Rs[h, 0, 2] * pts[k, 2] + ts[h, 0]
+            y = Rs[h, 1, 0] * pts[k, 0] + Rs[h, 1, 1] * pts[k, 1] + Rs[h, 1, 2] * pts[k, 2] + ts[h, 1]
+            z = Rs[h, 2, 0] * pts[k, 0] + Rs[h, 2, 1] * pts[k, 1] + Rs[h, 2, 2] * pts[k, 2] + ts[h, 2]
+            sz[k] = -1.0
+            if z <= 1e-6:
+                continue
+            nx = Rs[h, 0, 0] * nrm[k, 0] + Rs[h, 0, 1] * nrm[k, 1] + Rs[h, 0, 2] * nrm[k, 2]
+            ny = Rs[h, 1, 0] * nrm[k, 0] + Rs[h, 1, 1] * nrm[k, 1] + Rs[h, 1, 2] * nrm[k, 2]
+            nz = Rs[h, 2, 0] * nrm[k, 0] + Rs[h, 2, 1] * nrm[k, 1] + Rs[h, 2, 2] * nrm[k, 2]
+            if nx * x + ny * y + nz * z >= 0:  # back-facing
+                continue
+            uf = fx * x / z + cx
+            vf = fy * y / z + cy
+            if uf < 0 or vf < 0 or uf >= Ww or vf >= Hh:
+                continue
+            u = int(uf)
+            v = int(vf)
+            su[k] = u
+            sv[k] = v
+            sz[k] = z
+            c = (v // cell) * gw + u // cell
+            if z < zbuf[c]:
+                zbuf[c] = z
+        agree = 0.0
+        wrong = 0.0
+        nvis = 0.0
+        acc = np.zeros(15)
+        for k in range(N):
+            z = sz[k]
+            if z < 0:
+                continue
+            u = su[k]
+            v = sv[k]
+            c = (v // cell) * gw + u // cell
+            if z > zbuf[c] + tau:  # hidden by the model's own nearer surface
+                continue
+            nvis += 1.0
+            d = depth[v, u]
+            inm = mask[v, u]
+            if not (d > 0):  # unknown depth (0 or NaN)
+                if inm:
+                    sil[c] = True
+                continue
+            dz = z - d
+            if dz > tau and not inm:  # behind the observed surface: occluded, not wrong
+                continue
+            sil[c] = True
+            if abs(dz) <= tau:
+                agree += 1.0
+                if inm and textured:
+                    r = rgb[v, u, 0] / 255.0
+                    g = rgb[v, u, 1] / 255.0
+                    b = rgb[v, u, 2] / 255.0
+                    gf = 0.299 * r + 0.587 * g + 0.114 * b
+                    gm = grey[k]
+                    acc[0] += 1.0
+                    acc[1] += gm
+                    acc[2] += gf
+                    acc[3] += gm * gm
+                    acc[4] += gf * gf
+                    acc[5] += gm * gf
+                    s = r + g + b + 0.05
+                    for ch in range(3):
+                        cf = (r if ch == 0 else (g if ch == 1 else b)) / s
+                        cm = chrom[k, ch]
+                        acc[6 + ch] += cm
+                        acc[9 + ch] += cf
+                        acc[12] += cm * cm
+                        acc[13] += cf * cf
+                        acc[14] += cm * cf
+            else:
+                wrong += 1.0
+        nsil = 0.0
+        ninter = 0.0
+        nmask = 0.0
+        for g in range(G):
+            if mcell[g]:
+                nmask += 1.0
+            if sil[g]:
+                nsil += 1.0
+                if mcell[g]:
+                    ninter += 1.0
+        out[h, 0] = agree
+        out[h, 1] = wrong
+        out[h, 2] = nvis
+        out[h, 3] = ninter
+        out[h, 4] = nsil + nmask - ninter
+        for j in range(15):
+            out[h, 5 + j] = acc[j]
+
+
+def _corr_from_sums(n, sa, sb, saa, sbb, sab):
+    """Correlation from sums (n, sum a, sum b, sum a^2, sum b^2, sum ab; arrays or scalars); channels
+    summed when ``sa``, ``sb`` are (..., C)."""
+    ca = saa - (sa * sa).sum(axis=-1) / n
+    cb = sbb - (sb * sb).sum(axis=-1) / n
+    cab = sab - (sa * sb).sum(axis=-1) / n
+    # a flat colour on either side (variance lost in rounding): no evidence, correlation 0
+    flat = (ca <= 1e-6 * n) | (cb <= 1e-6 * n)
+    r = cab / np.sqrt(np.where(flat, 1.0, ca * cb))
+    return np.where(flat, 0.0, np.clip(r, -1.0, 1.0))
+
+
+def warmup() -> None:
+    """Compile :func:`_score_kernel` (or load it from Numba's cache) on a tiny input."""
+    f4 = np.float32
+    _score_kernel(np.zeros((1, 3), f4), np.zeros((1, 3), f4), np.zeros(1, f4), np.zeros((1, 3), f4), True,
+                  np.eye(3, dtype=f4)[None], np.zeros((1, 3), f4), 1.0, 1.0, 0.0, 0.0, np.zeros((2, 2), f4),
+                  np.zeros((2, 2), np.bool_), np.zeros((2, 2, 3), np.uint8), 1, 2, 2, np.zeros(4, np.bool_), 0.01,
+                  np.zeros(4), np.zeros(4, np.bool_), np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(1),
+                  np.zeros((1, 20)))
+
+
+def score_hypotheses(Xs: np.ndarray, surface: Surface, frame: Frame, cfg: RegistrationConfig) -> Scores:
+    """Score poses ``Xs`` (H, 4, 4; object in camera, metres) of ``surface`` against ``frame``.
+
+    The terms are described in the module docstring; ``cfg.verify_tau_rel`` (depth tolerance /
+    diameter), ``verify_w_depth``, ``verify_w_mask``, ``verify_w_texture`` (weights) and
+    ``verify_max_cells`` (cells along the image's longer side, at most) are the parameters. One Numba
+    pass per hypothesis (no (H, N) temporaries).
+    Returns:
+        :class:`Scores`; ``score`` in [-1, 1] (a hypothesis with no visible sample scores -1).
+    Raises:
+        ValueError: an empty instance mask.
+    """
+    Xs = np.asarray(Xs, dtype=np.float64).reshape(-1, 4, 4)
+    H = len(Xs)
+    Hh, Ww = frame.mask.shape
+    mv, mu = np.nonzero(frame.mask)
+    if len(mu) == 0:
+        raise ValueError("empty instance mask")
+    K = np.asarray(frame.K, dtype=np.float64)
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    zmed = float(np.median(Xs[:, 2, 3]))
+    # cells about the projected sample spacing (no holes between splatted samples), at most max_cells a side
+    cell = max(1, math.ceil(max(fx, fy) * surface.spacing / max(zmed, 1e-3)),
+               math.ceil(max(Hh, Ww) / cfg.verify_max_cells))
+    gw, gh = math.ceil(Ww / cell), math.ceil(Hh / cell)
+    G = gw * gh
+    mcell = np.zeros(G, dtype=np.bool_)
+    mcell[(mv // cell) * gw + mu // cell] = True
+    textured = surface.grey is not None and frame.rgb is not None
+    rgb = np.zeros((1, 1, 3), np.uint8)
+    if textured and frame.rgb is not None:
+        rgb = frame.rgb
+    if rgb.dtype != np.uint8:
+        rgb = np.clip(np.asarray(rgb) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    f4 = np.float32
+    Np = len(surface.points)
+    pts, nrm = surface.cast("points"), surface.cast("normals")
+    grey = surface.cast("grey") if textured else np.zeros(1, f4)
+    chrom = surface.cast("chroma") if textured else np.zeros((1, 3), f4)
+    depth = frame.depth if frame.depth.dtype == f4 else frame.depth.astype(f4)
+    out = np.zeros((H, 20))
+    _score_kernel(pts, nrm, grey, chrom, textured, Xs[:, :3, :3].astype(f4), Xs[:, :3, 3].astype(f4), fx, fy, cx, cy,
+                  depth, np.ascontiguousarray(frame.mask, dtype=np.bool_), np.ascontiguousarray(rgb), cell, gw, gh,
+                  mcell, cfg.verify_tau_rel * surface.diameter, np.empty(G), np.empty(G, np.bool_),
+                  np.empty(Np, np.int64), np.empty(Np, np.int64), np.empty(Np), out)
+    agree, wrong, n_vis, inter, union = out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4]
+    depth_s = agree / np.maximum(agree + wrong, 1.0)
+    iou = inter / np.maximum(union, 1.0)
+    texture = np.zeros(H)
+    if textured:
+        n = np.maximum(out[:, 5], 1.0)
+        ncc_g = _corr_from_sums(n, out[:, 6:7], out[:, 7:8], out[:, 8], out[:, 9], out[:, 10])
+        ncc_c = _corr_from_sums(n, out[:, 11:14], out[:, 14:17], out[:, 17], out[:, 18], out[:, 19])
+        share = cfg.verify_grey_share
+        texture = np.where(out[:, 5] >= 3, share * ncc_g + (1.0 - share) * ncc_c, 0.0)
+    wd, wm, wt = cfg.verify_w_depth, cfg.verify_w_mask, (cfg.verify_w_texture if textured else 0.0)
+    score = (wd * depth_s + wm * iou + wt * texture) / max(wd + wm + wt, 1e-12)
+    score = np.where(n_vis > 0, score, -1.0)
+    return Scores(score, depth_s, iou, texture, n_vis, textured)
+
+
+def recentred(Xs: np.ndarray, surface: Surface, frame: Frame) -> np.ndarray:
+    """Copies of the poses ``Xs`` (H, 4, 4) moved so that the centroid of their camera-facing samples
+    lies on the centroid of the observed masked cloud (a turned hypothesis keeps the model's centroid,
+    which for a partial view is often centimetres from where the turned model fits, beyond ICP's reach).
+    """
+    from ..datasets.geometry import backproject
+
+    obs, _, _ = backproject(frame.depth, frame.K, frame.mask, None)
+    if len(obs) == 0:
+        return Xs[:0]
+    c_obs = obs.mean(axis=0)
+    R, t = Xs[:, :3, :3], Xs[:, :3, 3]
+    P = np.matmul(surface.points, R.transpose(0, 2, 1)) + t[:, None, :]
+    front = (np.matmul(surface.normals, R.transpose(0, 2, 1)) * P).sum(axis=2) < 0
+    n = np.maximum(front.sum(axis=1), 1)[:, None]
+    c_front = (P * front[..., None]).sum(axis=1) / n
+    out = Xs.copy()
+    out[:, :3, 3] += c_obs - c_front
+    return out
+
+
+def local_search(Xs: np.ndarray, scores: np.ndarray, surface: Surface, frame: Frame, cfg: RegistrationConfig,
+                 seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Improve poses ``Xs`` (H, 4, 4) of scores ``scores`` (H,) by rotations about the model's centroid:
+    ``verify_search_rounds`` rounds of ``verify_search_n`` random rotations of at most
+    ``verify_search_deg`` degrees (halved each round) per pose, each also recentred on the observed
+    cloud (:func:`recentred`); a pose moves when a trial scores higher. Returns ``(poses, scores)``."""
+    from .verify import _small_rotations
+
+    rng = np.random.default_rng(seed)
+    Xs, scores = Xs.copy(), np.asarray(scores, dtype=np.float64).copy()
+    c = surface.centroid
+    ang = cfg.verify_search_deg
+    n = cfg.verify_search_n
+    for _ in range(cfg.verify_search_rounds):
+        S = _small_rotations(n, ang, rng)
+        X_ON = np.stack([X_from(Si, c - Si @ c) for Si in S])
+        trial = np.einsum("hij,njk->hnik", Xs, X_ON).reshape(-1, 4, 4)
+        trial = np.concatenate([trial, recentred(trial, surface, frame)])
+        st = score_hypotheses(trial, surface, frame, cfg).score.reshape(2, len(Xs), n)
+        trial = trial.reshape(2, len(Xs), n, 4, 4)
+        for h in range(len(Xs)):
+            a, j = np.unravel_index(int(np.argmax(st[:, h])), (2, n))
+            if st[a, h, j] > scores[h]:
+                Xs[h], scores[h] = trial[a, h, j], st[a, h, j]
+        ang /= 2.0
+    return Xs, scores
+
+
+@dataclass
+class Verified:
+    """Output of :func:`verify_hypotheses`: the kept pose ``X_CO`` (4, 4), its ``score`` (in [-1, 1]),
+    the index of the kept hypothesis among those scored (``index``; 0 is the input pose), how many were
+    scored (``n_hypotheses``) and ICP'd (``n_icp``), and whether the texture term was used."""
+
+    X_CO: np.ndarray
+    score: float
+    index: int
+    n_hypotheses: int
+    n_icp: int
+    textured: bool
+
+
+def verify_hypotheses(
+    X_CO: np.ndarray,
+    surface: Surface,
+    frame: Frame,
+    cfg: RegistrationConfig,
+    extra: np.ndarray | None = None,
+    icp=None,
+    obj_id: int | None = None,
+) -> Verified:
+    """Keep the best of several hypotheses of one instance (see the module docstring).
+
+    Args:
+        X_CO: (4, 4) the pose so far (object in camera, metres). surface: the object's :class:`Surface`.
+        frame: the :class:`Frame`. cfg: ``verify_*`` fields (``verify_turns``: turns per principal
+            axis, 0 or 1 for none; ``verify_icp``: hypotheses ICP'd at most; ``verify_margin``: only
+            the best is ICP'd when it leads the second by this much; ``verify_min_gain``: another
+            hypothesis replaces ``X_CO`` only when it scores this much higher).
+        extra: optional (E, 4, 4) further poses (other basins of the colour search, the global
+            method's); their turns are scored too.
+        icp: ``icp(X_CO) -> X_CO`` refinement (None: no ICP). obj_id: for the textureless log line.
+    Returns:
+        :class:`Verified`.
+    """
+    bases = [np.asarray(X_CO, dtype=np.float64)]
+    if extra is not None:
+        bases += [np.asarray(e, dtype=np.float64) for e in extra]
+    T = turns(surface, cfg.verify_turns) if cfg.verify_turns > 1 else np.eye(4)[None]
+    Xs = np.einsum("bij,tjk->btik", np.stack(bases), T).reshape(-1, 4, 4)
+    if cfg.verify_recentre:
+        Xs = np.concatenate([Xs, recentred(Xs[1:], surface, frame)])
+    sc = score_hypotheses(Xs, surface, frame, cfg)
+    if not sc.textured and surface.grey is None and obj_id not in _TEXTURELESS_LOGGED:
+        _TEXTURELESS_LOGGED.add(obj_id)
+        log.warning("object %s: model without colours, hypotheses verified on depth and mask alone", obj_id)
+    order = np.argsort(-sc.score, kind="stable")
+    if cfg.verify_search_rounds > 0:
+        Xs, score = Xs.copy(), sc.score.copy()
+        top = order[: cfg.verify_icp]
+        Xs[top], score[top] = local_search(Xs[top], score[top], surface, frame, cfg)
+        order = np.argsort(-score, kind="stable")
+    n_icp = 0
+    best_i, best_X, best_s = int(order[0]), Xs[order[0]], float(sc.score[order[0]])
+    if icp is not None:
+        k = min(cfg.verify_icp, len(order))
+        if k > 1 and sc.score[order[0]] - sc.score[order[1]] >= cfg.verify_margin:
+            k = 1  # one hypothesis clearly wins: stop early
+        refined = np.stack([icp(Xs[i]) for i in order[:k]])
+        n_icp = k
+        s2 = score_hypotheses(refined, surface, frame, cfg).score
+        j = int(np.argmax(s2))
+        best_i, best_X, best_s = int(order[j]), refined[j], float(s2[j])
+    # the input pose stays unless another scores clearly higher (near-ties are common on real frames:
+    # a flat bottle's front and back; the pose so far already fits the masked cloud)
+    if best_i != 0 and best_s < sc.score[0] + cfg.verify_min_gain:
+        best_i, best_X, best_s = 0, Xs[0], float(sc.score[0])
+    return Verified(best_X, best_s, best_i, len(Xs), n_icp, sc.textured)
