@@ -240,8 +240,16 @@ NB_FIG := -p FIGURES ../$(FIG)
 $(EXEC)/01_generate_dataset.ipynb: notebooks/01_generate_dataset.ipynb $(TRAIN_DIR)/manifest.json | $(VENV_OK)
 	$(call papermill,$<,-p PROFILE $(P_TRAIN_GEN) -p DATA ../$(TRAIN_DIR) $(NB_FIG) -p WORKERS $(WORKERS))
 
+# notebook 02 also draws Fig. 2 (figures/P/fig2_lmo_vs_ours.png): LM-O frames of LMO_FRAMES (a BOP LM-O root,
+# its test split; LMO when given, else the sample in ../shared/data/lmo) beside the training data's
+LMO_FRAMES ?= $(or $(LMO),../shared/data/lmo)
 $(EXEC)/02_dataset_overview.ipynb: notebooks/02_dataset_overview.ipynb $(TRAIN_DIR)/manifest.json | $(VENV_OK)
-	$(call papermill,$<,-p PROFILE $(P_TRAIN_GEN) -p DATA ../$(TRAIN_DIR) $(NB_FIG))
+	$(call papermill,$<,-p PROFILE $(P_TRAIN_GEN) -p DATA ../$(TRAIN_DIR) -p LMO $(abspath $(LMO_FRAMES)) $(NB_FIG))
+
+# Fig. 2 alone (`make fig2 PROFILE=demo`): the same figure without the rest of notebook 02
+FIG2 := $(FIG)/fig2_lmo_vs_ours.png
+$(FIG2): $(TRAIN_DIR)/manifest.json | $(VENV_OK)
+	$(PY) -m sixdpose.reporting.fig2 --lmo $(LMO_FRAMES) --ours $(TRAIN_DIR) --out $@
 
 $(EXEC)/03_train_segmentation.ipynb: notebooks/03_train_segmentation.ipynb $(RUNS)/seg/model.pt $(RUNS)/seg/pred_test/meta.json \
 	| $(VENV_OK)

@@ -138,7 +138,7 @@ def test_the_write_up_builds_from_generated_files(tmp_path, lmo):
                         extra={**report.dataset_values(e, tmp_path), **report.beyond_findings(res, "smoke")})
     (fig / "stats.csv").write_text("quantity,paper,this dataset\nimages,\"25,000\",6\n")
     report.dataset_table(fig / "stats.csv", gen / "table_dataset.tex")
-    for png in ("fig3_random_images.png", "fig7.png", "accuracy_threshold.png"):
+    for png in ("fig2_lmo_vs_ours.png", "fig3_random_images.png", "fig7.png", "accuracy_threshold.png"):
         report.placeholder_figure(png).savefig(fig / png)
     out = tmp_path / "build"
     env = {"TEXINPUTS": f"{gen}//:{fig}//:", "PATH": "/usr/bin:/bin"}
