@@ -7,9 +7,9 @@ import struct
 
 import numpy as np
 import pytest
-from test_reg_helpers import LMO, write_synthetic_dataset
 
 from sixdpose.reporting import fig2
+from test_reg_helpers import LMO, write_synthetic_dataset
 
 
 def _png_size(path) -> tuple[int, int]:

@@ -145,10 +145,8 @@ def caption(v: FrameView) -> str:
 def summary(ds: DatasetReader, name: str) -> str:
     """One line over (at most :data:`MAX_SUMMARY`) frames of ``ds``: ranges of distance, view and roll,
     and the fraction of frames with a repeated object."""
-    keys = ds.keys()
-    pick = keys if len(keys) <= MAX_SUMMARY else [keys[i] for i in np.linspace(0, len(keys) - 1, MAX_SUMMARY).astype(int)]
     views = []
-    for k in pick:
+    for k in pick_frames(ds, MAX_SUMMARY):
         s = ds.load(k, masks=False, rgb=False, depth=False)
         if s.instances:
             views.append(frame_view(s, _camera(ds, s)))
