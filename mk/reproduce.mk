@@ -28,11 +28,13 @@ LMO_SPLIT ?= test
 LMO_TRAIN_SPLIT ?= train_pbr
 
 ALL_HYBRID  := ransac ransac_icp fgr fgr_icp super4pcs super4pcs_icp
+# the paper's Table III hybrid rows rerun with its own settings (registration preset `paper`, section IV-B)
+PAPER_HYBRID := ransac_icp_paper fgr_icp_paper super4pcs_paper
 ALL_LEARNED := learned_it0 learned_it2 learned_it2_icp learned_it2_colour
 FEW_METHODS := ransac_icp super4pcs learned_it0 learned_it2
 HYBRID  := $(if $(filter few,$(P_METHODS)),$(filter $(FEW_METHODS),$(ALL_HYBRID)),$(ALL_HYBRID))
 LEARNED := $(if $(filter few,$(P_METHODS)),$(filter $(FEW_METHODS),$(ALL_LEARNED)),$(ALL_LEARNED))
-METHODS := $(HYBRID) $(LEARNED)
+METHODS := $(HYBRID) $(if $(filter yes,$(P_PAPER_ROWS)),$(PAPER_HYBRID)) $(LEARNED)
 SPLITS  := test single
 MASKS   := gt pred
 
@@ -86,6 +88,9 @@ CMD_fgr            := register --method fgr
 CMD_fgr_icp        := register --method fgr --icp
 CMD_super4pcs      := register --method super4pcs
 CMD_super4pcs_icp  := register --method super4pcs --icp
+CMD_ransac_icp_paper := register --method ransac --icp --preset paper
+CMD_fgr_icp_paper    := register --method fgr --icp --preset paper
+CMD_super4pcs_paper  := register --method super4pcs --preset paper
 CMD_learned_it0    := predict-pose --pose $(RUNS)/pose --iterations 0
 CMD_learned_it2    := predict-pose --pose $(RUNS)/pose --refiner $(RUNS)/refiner --iterations 2
 CMD_learned_it2_icp    := $(CMD_learned_it2) --icp

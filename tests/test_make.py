@@ -55,7 +55,13 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
         if "--data ../shared/data/ycbv_sample" in line
     ]
     evals = [line for line in _lines(out, "evaluate") if "ycbv_sample" not in line and kinect not in line]
-    assert len(poses) == 40 and len(evals) == 40  # 10 methods x 2 splits x 2 mask sources
+    # 10 methods x 2 splits x 2 mask sources, + at cpu and paper the 3 hybrid rows with the paper's settings
+    paper_rows = [line for line in poses if "--preset paper" in line]
+    assert len(paper_rows) == (12 if ycbv else 0)
+    assert len(poses) == 40 + len(paper_rows) and len(evals) == len(poses)
+    assert sorted({re.search(r"_(?:gt|pred)_(\w+_paper)\.csv", line).group(1) for line in paper_rows}) == \
+        (["fgr_icp_paper", "ransac_icp_paper", "super4pcs_paper"] if ycbv else [])
+    assert all(line.startswith(".venv/bin/sixdpose register ") for line in paper_rows)
     sensor = [line for line in _lines(out, "evaluate") if f"--data {kinect} " in line]
     assert sorted(re.search(r"--result-name (\S+)", line).group(1) for line in sensor) == \
         ["test_kinect_gt_ransac_icp", "test_kinect_gt_super4pcs_icp"]
@@ -76,7 +82,7 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
     assert len(long) == (2 if ycbv else 0) and all(
         ("--epochs 12" in line) == (profile == "cpu") or "--resume" in line for line in long)
     assert all(f"--results-dir results/{profile}" in line for line in _lines(out, "evaluate"))
-    assert sum("--masks gt --min-px 400" in line for line in poses) == 12
+    assert sum("--masks gt --min-px 400" in line for line in poses) == 12 + len(paper_rows) // 2
     # every notebook reads what make wrote: no notebook trains, generates or writes a result
     assert "SEG_PROFILE" not in out
     assert len(re.findall(r"-m papermill .*notebooks/0\d_\w+\.ipynb notebooks/executed/" + profile, out)) == 9
