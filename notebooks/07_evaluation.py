@@ -86,6 +86,17 @@ print("\n".join(f"machine {v}: {k}" for k, v in report.machines(entries).items()
 pd.DataFrame(t2)
 
 # %% [markdown]
+# The paper's FPS include every overhead of a method (its section V-A). `benchmarks/table2_fps.py --out
+# RESULTS/table2_fps.json` measures that: per method, Mask R-CNN on the frame, then the whole pose stage
+# (normals, features, registration, ICP, colour verification; or the networks and refinement), frames in
+# memory; the write-up's Table II end to end is that file when it is there.
+
+# %%
+t2e = report.write_table2_e2e(RESULTS, figures / "table2_e2e.csv", tex / "table2_e2e.tex")
+print(report.table2_e2e_note(RESULTS))
+pd.DataFrame(t2e)
+
+# %% [markdown]
 # ## Per object
 #
 # ADD(-S) % per object and method, for each split and mask source (CSV for all four, LaTeX too).

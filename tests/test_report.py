@@ -249,7 +249,8 @@ def test_real_frames_and_ablation_tables(tmp_path):
     rows = report.write_real_table(d, tmp_path / "r.csv", tmp_path / "r.tex")
     assert rows == [] and "not run at this profile" in (tmp_path / "r.tex").read_text()
     f = report.beyond_findings(d, "cpu")
-    assert set(f) == {"finding@real", "finding@sensor", "finding@ablation"} and f["finding@sensor"] == ""
+    assert set(f) == {"finding@real", "finding@sensor", "finding@ablation", "finding@fps_e2e"}
+    assert f["finding@sensor"] == ""
     assert "does not run that branch" in f["finding@real"] and "has not run the ablation" in f["finding@ablation"]
     for name, acc, auc in (("ycbv_gt_learned", 36.0, 85.0), ("ycbv_gt_learned_ideal", 36.0, 76.0),
                            ("ycbv_gt_learned_colour", 75.0, 90.0), ("ycbv_gt_super4pcs_icp", 90.0, 97.0)):
@@ -319,3 +320,28 @@ def test_paper_settings_rows_appear_only_with_their_results(results, tmp_path):
     assert "on average over 2 methods" in s and "lower than" in s and "-15.00 points" in s
     report.write_table3(e, tmp_path / "t3.csv", tmp_path / "t3.tex")
     assert "Super4PCS (paper settings, rerun)" in (tmp_path / "t3.tex").read_text()
+
+
+def test_table2_end_to_end_from_the_benchmark_result(tmp_path):
+    d = tmp_path / "results"
+    rows = report.write_table2_e2e(d, tmp_path / "t.csv", tmp_path / "t.tex")
+    assert rows == [] and "not run" in (tmp_path / "t.tex").read_text()
+    assert "has not run" in report.beyond_findings(d, "cpu")["finding@fps_e2e"]
+    bench = [{"method": "ransac_icp", "command": "register --method ransac --icp", "frames": 4, "instances": 10,
+              "e2e_fps": 0.25, "pose_fps": 1.5, "seg_ms_per_frame": 2500.0, "e2e_ms_per_frame": 4000.0,
+              "pose_ms_per_frame": 666.0},
+             {"method": "learned_it2", "command": "predict-pose", "frames": 4, "instances": 10, "e2e_fps": 0.3,
+              "pose_fps": 2.0, "seg_ms_per_frame": 2600.0, "e2e_ms_per_frame": 3300.0, "pose_ms_per_frame": 500.0}]
+    write_result(report.TABLE2_BENCH, bench, results_dir=d,
+                 config={"data": "../shared/data/ycbv_sample", "split": "train_real", "segmentation": "untrained",
+                         "pose": "untrained paper networks", "preset": "default"})
+    rows = report.write_table2_e2e(d, tmp_path / "t.csv", tmp_path / "t.tex")
+    assert [r["method"] for r in rows] == ["RANSAC + ICP", "learned + 2 refinement it."]
+    assert rows[0]["paper"] == TABLES["II"].rows["Ours Hybrid(RANSAC + ICP)"] and rows[0]["instances"] == 2.5
+    assert rows[1]["e2e_fps"] == 0.3 and rows[1]["pose_fps"] == 2.0
+    assert "RANSAC + ICP & " in (tmp_path / "t.tex").read_text()
+    note = report.beyond_findings(d, "cpu")["finding@fps_e2e"]
+    assert note.startswith("Measured by benchmarks/table2_fps.py on 4 frames of ycbv_sample (train_real)")
+    write_result(report.TABLE2_BENCH, [{"method": "nonsense", "frames": 1}], results_dir=d)
+    with pytest.raises(report.ReportError, match="table2_fps.json: method 'nonsense'"):
+        report.table2_e2e(d)
