@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import os
 import sys
 import tempfile
 import time
@@ -237,8 +238,9 @@ def main(argv: list[str] | None = None) -> int:
               f"{r['seg_ms_per_frame']:6.0f} ms)   pose stage only {r['pose_fps']:6.3f} FPS "
               f"({r['pose_ms_per_frame']:6.0f} ms/frame, {n_inst / n:.1f} instances/frame)", flush=True)
     threads = torch.get_num_threads()
+    load = os.getloadavg()[0]  # other jobs on the machine slow every row alike; the record says how busy it was
     print(f"\n{len(samples) - 1} frames of {args.data} ({args.split}), disk reads excluded; Mask R-CNN: {seg_label}; "
-          f"learned: {pose_label}; torch threads {threads}")
+          f"learned: {pose_label}; torch threads {threads}, {os.cpu_count()} CPUs, load average {load:.1f}")
     print(f"\n{'method':15s} {'e2e FPS':>8s} {'pose-stage FPS':>15s}")
     for r in rows:
         print(f"{r['method']:15s} {r['e2e_fps']:8.3f} {r['pose_fps']:15.3f}")
@@ -257,7 +259,9 @@ def main(argv: list[str] | None = None) -> int:
                                  f"excluded",
                      config={"data": args.data, "split": args.split, "frames": args.frames, "stride": args.stride,
                              "segmentation": seg_label, "pose": pose_label, "preset": args.preset,
-                             "min_px": args.min_px, "threads": threads, "methods": methods})
+                             "min_px": args.min_px, "threads": threads, "methods": methods},
+                     notes=f"load average {load:.2f} over the last minute at the end of the run, on {os.cpu_count()} "
+                           "CPUs: other jobs running at the same time lower every figure")
         print(f"wrote {out}")
     tmp.cleanup()
     return 0
