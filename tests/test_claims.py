@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -15,6 +16,13 @@ REPO = Path(__file__).resolve().parents[1]
 def _res(d, name, acc, n=1000, fps=1.0):
     write_result(name, {"accuracy": acc, "n_gt": n, "n_correct": round(acc * n / 100), "fps": fps},
                  results_dir=d)
+
+
+def _gpu(path):
+    """Give a result file's machine a GPU (its provenance), as if it had been measured on one."""
+    doc = json.loads(path.read_text())
+    doc["provenance"]["hardware"]["gpus"] = ["Test GPU"]
+    path.write_text(json.dumps(doc))
 
 
 def _by_key(rows):
@@ -49,14 +57,21 @@ def test_verdicts_from_result_files(tmp_path):
     assert rows["super4pcs"].verdict == "contradicted" and "RANSAC + ICP 92.00 %" in rows["super4pcs"].figure
     assert rows["noise_free"].verdict == "supported"
     assert rows["hybrids_real"].verdict == "contradicted" and "40.33 %" in rows["hybrids_real"].figure
-    assert rows["learned_faster"].verdict == "supported" and "ratio 6.00" in rows["learned_faster"].figure
+    # measured without a GPU, the claim about GPU-accelerated networks stays open; with one, the ratio decides
+    c = rows["learned_faster"]
+    assert c.verdict == "inconclusive" and "ratio 6.00, CPU only" in c.figure and "without a GPU" in c.why
+    for name in ("test_gt_learned_it2", "test_gt_ransac_icp", "test_gt_super4pcs_icp"):
+        _gpu(d / f"{name}.json")
+    assert _by_key(C.claims(d, "cpu"))["learned_faster"].verdict == "supported"
     _res(d, "ycbv_gt_fgr_icp", 30.0, n=140)  # one hybrid near the paper's LM-O level: no longer all above
     assert _by_key(C.claims(d, "cpu"))["hybrids_real"].verdict == "inconclusive"
     # the end-to-end benchmark, when it ran, decides the speed claim
-    write_result("table2_fps", [{"method": "ransac_icp", "e2e_fps": 0.2}, {"method": "learned_it2", "e2e_fps": 0.21}],
+    write_result("table2_fps", [{"method": "ransac_icp", "e2e_fps": 0.2}, {"method": "learned_it2", "e2e_fps": 0.1}],
                  results_dir=d)
+    _gpu(d / "table2_fps.json")
     c = _by_key(C.claims(d, "cpu"))["learned_faster"]
-    assert c.verdict == "inconclusive" and "end to end" in c.figure
+    assert c.verdict == "contradicted" and c.figure.startswith("end to end with Mask R-CNN")
+    assert "ratio 0.50" in c.figure
 
 
 def test_the_ablation_decides_only_with_seeds(tmp_path):

@@ -185,32 +185,49 @@ def hybrids_on_real_data(results_dir: Path, profile: str, entries: dict) -> Clai
     return Claim(key, claim, where, fig, "inconclusive", "the results fall on both sides of that level")
 
 
+def _gpu(result) -> bool:
+    """Whether the machine that wrote ``result`` had a GPU (its provenance's hardware)."""
+    return bool(((result.provenance or {}).get("hardware") or {}).get("gpus"))
+
+
 def learned_faster(results_dir: Path, profile: str, entries: dict) -> Claim:
-    """Abstract and section VI: learned methods are faster than the hybrid ones (Super4PCS painfully slow).
-    The end-to-end benchmark (``table2_fps``) when it ran, else the graph's pose-stage FPS on the
-    multi-instance split with GT masks: learned + 2 refinement iterations against the fastest hybrid."""
-    key, claim, where = ("learned_faster", "Learned methods are faster than the hybrid ones", "abstract, VI")
+    """Abstract and section VI: GPU-accelerated learned methods are faster than the hybrid ones (Super4PCS
+    painfully slow). Learned + 2 refinement iterations against the fastest hybrid method: end to end with
+    Mask R-CNN (the benchmark ``table2_fps``) when it ran, and the pose stage as the graph timed it on the
+    multi-instance split with GT masks. The claim is about GPUs: measured without one, it is inconclusive
+    (the figures still show the ratio on the CPU)."""
+    key, claim, where = ("learned_faster", "Learned methods, GPU-accelerated, are faster than the hybrid ones",
+                         "abstract, VI")
+    sources = []  # (what, {method key: fps}, had a GPU)
     bench = _optional(results_dir, TABLE2_BENCH)
-    fps: dict[str, float] = {}
     if bench is not None:
-        fps = {str(r["method"]): float(r["e2e_fps"]) for r in bench.rows if r.get("e2e_fps")}
-        src = "end to end with Mask R-CNN (table2_fps)"
-    if not fps:
-        fps = {k[2]: e.figure("fps") for k, e in entries.items() if k[:2] == ("test", "gt") and e.figure("fps")}
-        src = "pose stage, multi-instance split, GT masks"
-    hyb = {k: v for k, v in fps.items() if k in METHOD and METHOD[k].kind == "hybrid"}
-    learned = fps.get("learned_it2")
-    if learned is None or not hyb:
+        sources.append(("end to end with Mask R-CNN (table2_fps)",
+                        {str(r["method"]): float(r["e2e_fps"]) for r in bench.rows if r.get("e2e_fps")}, _gpu(bench)))
+    graph = {k[2]: e for k, e in entries.items() if k[:2] == ("test", "gt") and e.figure("fps")}
+    sources.append(("pose stage, multi-instance split, GT masks", {k: e.figure("fps") for k, e in graph.items()},
+                    any(_gpu(e.result) for e in graph.values())))
+    figs, decided = [], []
+    for what, fps, gpu in sources:
+        hyb = {k: v for k, v in fps.items() if k in METHOD and METHOD[k].kind == "hybrid"}
+        learned = fps.get("learned_it2")
+        if learned is None or not hyb:
+            continue
+        fast = max(hyb, key=hyb.get)
+        ratio = learned / hyb[fast]
+        figs.append(f"{what}: learned + 2 it. {learned:.3g} FPS, fastest hybrid {METHOD[fast].label} "
+                    f"{hyb[fast]:.3g} FPS (ratio {ratio:.2f}, {'GPU' if gpu else 'CPU only'})")
+        decided.append((ratio, gpu))
+    if not figs:
         return _missing(key, claim, where, "the FPS of learned_it2 and of a hybrid method")
-    fast = max(hyb, key=hyb.get)
-    ratio = learned / hyb[fast]
-    fig = (f"{src}: learned + 2 it. {learned:.2f} FPS, fastest hybrid {METHOD[fast].label} {hyb[fast]:.2f} FPS "
-           f"(ratio {ratio:.2f}; CPU only, no GPU)")
+    ratio, gpu = decided[0]
+    if not gpu:
+        return Claim(key, claim, where, "; ".join(figs), "inconclusive",
+                     "measured without a GPU (the claim is about GPU-accelerated networks)")
     if ratio > FPS_RATIO:
-        return Claim(key, claim, where, fig, "supported", f"ratio above {FPS_RATIO}")
+        return Claim(key, claim, where, "; ".join(figs), "supported", f"ratio above {FPS_RATIO}")
     if ratio < 1 / FPS_RATIO:
-        return Claim(key, claim, where, fig, "contradicted", f"ratio below 1/{FPS_RATIO}")
-    return Claim(key, claim, where, fig, "inconclusive", f"ratio within {FPS_RATIO} either way")
+        return Claim(key, claim, where, "; ".join(figs), "contradicted", f"ratio below 1/{FPS_RATIO}")
+    return Claim(key, claim, where, "; ".join(figs), "inconclusive", f"ratio within {FPS_RATIO} either way")
 
 
 def super4pcs_best_hybrid(results_dir: Path, profile: str, entries: dict) -> Claim:
