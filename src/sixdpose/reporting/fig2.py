@@ -128,8 +128,10 @@ def frame_view(sample: Sample, cam_R_WC: np.ndarray | None = None) -> FrameView:
 
 
 def _camera(ds: DatasetReader, sample: Sample) -> np.ndarray | None:
-    gt = getattr(ds, "gt", None)  # the synthetic reader's gt.yml entries (BOP has no world frame)
-    entry = gt.get(sample.im_id) if isinstance(gt, dict) else None
+    from ..datasets.synthetic import SyntheticDataset
+
+    # the synthetic reader's gt.yml entries hold the generator's camera pose (BOP has no world frame)
+    entry = ds.gt.get(sample.im_id) if isinstance(ds, SyntheticDataset) else None
     return np.asarray(entry["cam_R_WC"], dtype=float) if isinstance(entry, dict) and "cam_R_WC" in entry else None
 
 
