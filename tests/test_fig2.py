@@ -23,6 +23,13 @@ def _rot_x(deg):
     return np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
 
 
+def _sample(rotations, centres):
+    from sixdpose.datasets.base import Instance, Sample
+
+    insts = [Instance("a", 1, k, R, t) for k, (R, t) in enumerate(zip(rotations, centres, strict=False))]
+    return Sample(0, 0, None, None, np.eye(3), insts)
+
+
 def test_angles_of_known_cameras():
     # a camera looking 30 deg down at a table, no roll: the world's up is (0, -cos 30, -sin 30) in its frame
     up = np.array([0.0, -math.cos(math.radians(30)), -math.sin(math.radians(30))])
@@ -39,6 +46,9 @@ def test_angles_of_known_cameras():
     assert np.allclose(fig2.up_from_axes(np.stack([R_CW] * 5)), up)
     assert fig2.up_from_axes(np.stack([np.eye(3), _rot_x(90), _rot_x(180)])) is None  # objects lying anyhow
     assert fig2.up_from_centres(centres[:2]) is None
+    # looking straight down, the roll is undefined and left out
+    top = fig2.frame_view(_sample([np.eye(3)] * 3, centres), cam_R_WC=np.diag([1.0, -1.0, -1.0]))
+    assert top.view_deg == pytest.approx(90) and top.roll_deg is None and "roll n/a (top-down)" in fig2.caption(top)
 
 
 def test_fig2_png_from_a_synthetic_dataset_without_lmo(tmp_path):

@@ -52,9 +52,10 @@ class FrameView:
     Attributes:
         distance: median camera-to-object distance (m). view_deg: optical axis below the table plane (deg;
         None: fewer than 3 objects and no camera pose). roll_deg: image up against the table's up (deg; None
-        as view_deg). n_instances, n_objects: annotated instances and distinct objects. repeated: object
-        name -> number of instances, for the objects seen more than once. up_from: ``camera`` (the
-        generator's camera pose), ``object axes`` or ``plane fit`` (the objects' centres).
+        as view_deg, or the view steeper than :data:`ROLL_MAX_VIEW_DEG`). n_instances, n_objects: annotated
+        instances and distinct objects. repeated: object name -> number of instances, for the objects seen
+        more than once. up_from: ``camera`` (the generator's camera pose), ``object axes`` or ``plane fit``
+        (the objects' centres).
     """
 
     distance: float
@@ -78,6 +79,9 @@ def up_from_centres(t: np.ndarray) -> np.ndarray | None:
     return -n if float(n @ -c) < 0 else n
 
 
+#: Views steeper than this (degrees below the table plane) have no meaningful roll: looking straight down, the
+#: table's up projects to (almost) a point in the image, so their roll is left out (``roll_deg`` None).
+ROLL_MAX_VIEW_DEG = 75.0
 #: Cosine above which an object's +z axis counts as agreeing with the others' mean (about 26 degrees).
 AXIS_AGREEMENT = 0.9
 
@@ -122,6 +126,8 @@ def frame_view(sample: Sample, cam_R_WC: np.ndarray | None = None) -> FrameView:
     else:
         up, src = up_from_centres(t), "plane fit"
     view, roll = angles(up) if up is not None else (None, None)
+    if view is not None and view > ROLL_MAX_VIEW_DEG:
+        roll = None
     return FrameView(distance=float(np.median(np.linalg.norm(t, axis=1))) if len(t) else math.nan,
                      view_deg=view, roll_deg=roll, n_instances=len(sample.instances), n_objects=len(names),
                      repeated={k: v for k, v in sorted(names.items()) if v > 1}, up_from=src)
@@ -137,7 +143,8 @@ def _camera(ds: DatasetReader, sample: Sample) -> np.ndarray | None:
 
 def caption(v: FrameView) -> str:
     """Two caption lines for a frame: distance, view and roll; instances, objects and repeats."""
-    ang = "view/roll n/a" if v.view_deg is None else f"view {v.view_deg:.0f}°, roll {v.roll_deg:+.0f}°"
+    roll = "roll n/a (top-down)" if v.roll_deg is None else f"roll {v.roll_deg:+.0f}°"
+    ang = "view/roll n/a" if v.view_deg is None else f"view {v.view_deg:.0f}°, {roll}"
     rep = ", ".join(f"{n}x {k}" for k, n in v.repeated.items()) or "no repeated object"
     if len(rep) > 48:
         rep = rep[:45] + "..."
@@ -145,8 +152,8 @@ def caption(v: FrameView) -> str:
 
 
 def summary(ds: DatasetReader, name: str) -> str:
-    """One line over (at most :data:`MAX_SUMMARY`) frames of ``ds``: ranges of distance, view and roll,
-    and the fraction of frames with a repeated object."""
+    """One line over (at most :data:`MAX_SUMMARY`) frames of ``ds``: ranges of distance, view and roll (of
+    the frames that have one), and the fraction of frames with a repeated object."""
     views = []
     for k in pick_frames(ds, MAX_SUMMARY):
         s = ds.load(k, masks=False, rgb=False, depth=False)
