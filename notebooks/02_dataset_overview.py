@@ -45,10 +45,11 @@ rng = np.random.default_rng(SEED)
 # ## Fig. 2: LM-O beside our frames
 #
 # Three LM-O frames above three of ours, each captioned from its ground truth: the median camera-to-object
-# distance, the optical axis' angle below the table plane, the camera roll, and the objects that repeat; above
-# each row the same over (up to 500 of) the dataset's frames. LM-O is one scene seen from one side with no
-# repeated object; the generated data varies camera side, distance and roll and repeats objects
-# (`sixdpose.reporting.fig2`; the same figure alone: `python -m sixdpose.reporting.fig2 --ours DATA --out PNG`).
+# distance, the optical axis' angle below the table plane, the camera roll, the camera's side (azimuth), and
+# the objects that repeat; above each row the same over (up to 500 of) the dataset's frames. The paper's point:
+# LM-O is one scene seen from one side, at one distance, upright, with no repeated object, while the generated
+# data varies these; the summary lines measure it (`sixdpose.reporting.fig2`; the same figure alone:
+# `python -m sixdpose.reporting.fig2 --ours DATA --out PNG`).
 
 # %%
 write_fig2(LMO, DATA, f"{FIGURES}/fig2_lmo_vs_ours.png")

@@ -47,8 +47,19 @@ def test_angles_of_known_cameras():
     assert fig2.up_from_axes(np.stack([np.eye(3), _rot_x(90), _rot_x(180)])) is None  # objects lying anyhow
     assert fig2.up_from_centres(centres[:2]) is None
     # looking straight down, the roll is undefined and left out
-    top = fig2.frame_view(_sample([np.eye(3)] * 3, centres), cam_R_WC=np.diag([1.0, -1.0, -1.0]))
+    top = fig2.frame_view(_sample([np.eye(3)] * 3, centres), camera=(np.diag([1.0, -1.0, -1.0]), np.array([0, 2.0, 2])))
     assert top.view_deg == pytest.approx(90) and top.roll_deg is None and "roll n/a (top-down)" in fig2.caption(top)
+    assert top.azimuth_deg == pytest.approx(90) and "az. +90°" in fig2.caption(top)  # the camera on the world's +y side
+    # the camera's side about an upright reference object: the camera on the object's -x side
+    R_CO = R_CW  # an upright object with the world's axes
+    t_CO = R_CW @ np.array([1.0, 0.0, 0.0]) + [0, 0, 1.0]
+    cam_W = -R_CW.T @ np.array([0, 0, 1.0])  # the camera centre in the world; the object sits at (1, 0, 0)
+    v = fig2.frame_view(_sample([R_CO, R_CO], [t_CO, t_CO + 0.1]), ref_obj=1)
+    want = np.degrees(np.arctan2(cam_W[1], cam_W[0] - 1.0))
+    assert v.up_from == "object axes" and v.azimuth_deg == pytest.approx(want) and abs(want) > 90
+    assert fig2.frame_view(_sample([R_CO, R_CO], [t_CO, t_CO + 0.1]), ref_obj=7).azimuth_deg is None
+    assert fig2.azimuth_span([170, -170, 180]) == pytest.approx(20) and fig2.azimuth_span([0, 90, 180, 270]) == 270
+    assert fig2.azimuth_span([5]) == 0
 
 
 def test_fig2_png_from_a_synthetic_dataset_without_lmo(tmp_path):

@@ -7,6 +7,9 @@ Each frame carries a caption computed from its ground truth (nothing typed):
 * ``d``: the median camera-to-object distance in metres (the norms of the instances' ``t`` of ``X_CO``);
 * ``view``: the optical axis' angle below the table plane, in degrees;
 * ``roll``: the angle between the image's "up" and the table's up projected into the image, in degrees;
+* ``az.``: the camera's side, its azimuth around the table in degrees: in the generator's world frame (about
+  the table's centre) for ours; for LM-O, about the upright reference object (the object seen in most
+  frames: the scene is static, so any fixed object gives the same sides up to an offset);
 * the instances, the distinct objects and the objects that repeat (``2x 006_mustard_bottle``).
 
 The table's up direction in the camera frame comes from the generator's camera pose (``cam_R_WC`` of
@@ -53,7 +56,8 @@ class FrameView:
         distance: median camera-to-object distance (m). view_deg: optical axis below the table plane (deg;
         None: fewer than 3 objects and no camera pose). roll_deg: image up against the table's up (deg; None
         as view_deg, or the view steeper than :data:`ROLL_MAX_VIEW_DEG`). n_instances, n_objects: annotated
-        instances and distinct objects. repeated: object name -> number of instances, for the objects seen
+        instances and distinct objects. azimuth_deg: the camera's side (deg; None without a camera pose or
+        an upright reference object). repeated: object name -> number of instances, for the objects seen
         more than once. up_from: ``camera`` (the generator's camera pose), ``object axes`` or ``plane fit``
         (the objects' centres).
     """
@@ -61,6 +65,7 @@ class FrameView:
     distance: float
     view_deg: float | None
     roll_deg: float | None
+    azimuth_deg: float | None
     n_instances: int
     n_objects: int
     repeated: dict[str, int]
@@ -114,51 +119,85 @@ def angles(up_C: np.ndarray) -> tuple[float, float]:
     return view, roll
 
 
-def frame_view(sample: Sample, cam_R_WC: np.ndarray | None = None) -> FrameView:
-    """The :class:`FrameView` of ``sample``; ``cam_R_WC`` (3, 3), the camera's rotation in a world frame
-    whose +z is up, where the dataset records it (else :func:`up_from_axes`, else :func:`up_from_centres`)."""
+def frame_view(sample: Sample, camera: tuple[np.ndarray, np.ndarray] | None = None,
+               ref_obj: int | None = None) -> FrameView:
+    """The :class:`FrameView` of ``sample``. ``camera``: ``(cam_R_WC (3, 3), cam_t_WC (3,) m)``, the camera's
+    pose in a world frame whose +z is up and whose table is centred on the z axis, where the dataset
+    records it; else the up direction from :func:`up_from_axes` (then the azimuth about the instance of
+    ``ref_obj`` when the frame shows it), else from :func:`up_from_centres` (no azimuth)."""
     t = np.array([i.t for i in sample.instances], dtype=float).reshape(-1, 3)
     names = Counter(i.obj_name for i in sample.instances)
-    if cam_R_WC is not None:
-        up, src = np.asarray(cam_R_WC, dtype=float).T @ np.array([0.0, 0.0, 1.0]), "camera"
+    azimuth = None
+    if camera is not None:
+        up, src = np.asarray(camera[0], dtype=float).T @ np.array([0.0, 0.0, 1.0]), "camera"
+        azimuth = math.degrees(math.atan2(float(camera[1][1]), float(camera[1][0])))
     elif (up := up_from_axes(np.array([i.R for i in sample.instances]))) is not None:
         src = "object axes"
+        ref = next((i for i in sample.instances if i.obj_id == ref_obj), None)
+        if ref is not None:
+            p_O = -np.asarray(ref.R, dtype=float).T @ np.asarray(ref.t, dtype=float)  # the camera in the object frame
+            azimuth = math.degrees(math.atan2(p_O[1], p_O[0]))
     else:
         up, src = up_from_centres(t), "plane fit"
     view, roll = angles(up) if up is not None else (None, None)
     if view is not None and view > ROLL_MAX_VIEW_DEG:
         roll = None
     return FrameView(distance=float(np.median(np.linalg.norm(t, axis=1))) if len(t) else math.nan,
-                     view_deg=view, roll_deg=roll, n_instances=len(sample.instances), n_objects=len(names),
+                     view_deg=view, roll_deg=roll, azimuth_deg=azimuth, n_instances=len(sample.instances),
+                     n_objects=len(names),
                      repeated={k: v for k, v in sorted(names.items()) if v > 1}, up_from=src)
 
 
-def _camera(ds: DatasetReader, sample: Sample) -> np.ndarray | None:
+def _camera(ds: DatasetReader, sample: Sample) -> tuple[np.ndarray, np.ndarray] | None:
     from ..datasets.synthetic import SyntheticDataset
 
     # the synthetic reader's gt.yml entries hold the generator's camera pose (BOP has no world frame)
     entry = ds.gt.get(sample.im_id) if isinstance(ds, SyntheticDataset) else None
-    return np.asarray(entry["cam_R_WC"], dtype=float) if isinstance(entry, dict) and "cam_R_WC" in entry else None
+    if not isinstance(entry, dict) or "cam_R_WC" not in entry or "cam_t_WC" not in entry:
+        return None
+    return np.asarray(entry["cam_R_WC"], dtype=float), np.asarray(entry["cam_t_WC"], dtype=float)
+
+
+def reference_object(ds: DatasetReader) -> int | None:
+    """The obj_id seen in most of (at most :data:`MAX_SUMMARY`) frames of ``ds`` (the azimuth's reference
+    where there is no camera pose); None without annotations."""
+    seen: Counter = Counter()
+    for k in pick_frames(ds, MAX_SUMMARY):
+        seen.update({i.obj_id for i in ds.load(k, masks=False, rgb=False, depth=False).instances})
+    return seen.most_common(1)[0][0] if seen else None
+
+
+def azimuth_span(azimuths: list[float]) -> float:
+    """The smallest arc (degrees, 0-360) holding every azimuth of ``azimuths`` (degrees): 360 minus the
+    largest gap between neighbours on the circle; 0 for fewer than 2."""
+    a = sorted(x % 360.0 for x in azimuths)
+    if len(a) < 2:
+        return 0.0
+    gaps = [b - c for c, b in zip(a, a[1:], strict=False)] + [a[0] + 360.0 - a[-1]]
+    return 360.0 - max(gaps)
 
 
 def caption(v: FrameView) -> str:
     """Two caption lines for a frame: distance, view and roll; instances, objects and repeats."""
     roll = "roll n/a (top-down)" if v.roll_deg is None else f"roll {v.roll_deg:+.0f}°"
     ang = "view/roll n/a" if v.view_deg is None else f"view {v.view_deg:.0f}°, {roll}"
+    if v.azimuth_deg is not None:
+        ang += f", az. {v.azimuth_deg:+.0f}°"
     rep = ", ".join(f"{n}x {k}" for k, n in v.repeated.items()) or "no repeated object"
     if len(rep) > 48:
         rep = rep[:45] + "..."
     return f"d {v.distance:.2f} m, {ang}\n{v.n_instances} inst. / {v.n_objects} obj.; {rep}"
 
 
-def summary(ds: DatasetReader, name: str) -> str:
+def summary(ds: DatasetReader, name: str, ref_obj: int | None = None) -> str:
     """One line over (at most :data:`MAX_SUMMARY`) frames of ``ds``: ranges of distance, view and roll (of
-    the frames that have one), and the fraction of frames with a repeated object."""
+    the frames that have one), the arc of camera sides (:func:`azimuth_span`; about ``ref_obj`` where there
+    is no camera pose), and the fraction of frames with a repeated object."""
     views = []
     for k in pick_frames(ds, MAX_SUMMARY):
         s = ds.load(k, masks=False, rgb=False, depth=False)
         if s.instances:
-            views.append(frame_view(s, _camera(ds, s)))
+            views.append(frame_view(s, _camera(ds, s), ref_obj))
     if not views:
         return f"{name}: no annotated frame"
 
@@ -169,6 +208,7 @@ def summary(ds: DatasetReader, name: str) -> str:
     rep = sum(bool(v.repeated) for v in views) / len(views)
     return (f"{name}, {len(views)} frames: d {rng([v.distance for v in views], '{:.2f}')} m, view "
             f"{rng([v.view_deg for v in views], '{:.0f}')}°, roll {rng([v.roll_deg for v in views], '{:+.0f}')}°, "
+            f"sides over {azimuth_span([v.azimuth_deg for v in views if v.azimuth_deg is not None]):.0f}°, "
             f"{100 * rep:.0f} % of frames with a repeated object (up from: "
             f"{', '.join(sorted({v.up_from for v in views}))})")
 
@@ -199,11 +239,13 @@ def draw_fig2(lmo: DatasetReader | None, ours: DatasetReader, n: int = 3, lmo_na
         if ds is None:
             axes[row][0].text(0.0, 0.5, f"{name}: dataset not given", fontsize=9, va="center")
             continue
+        ref = reference_object(ds)
         for ax, key in zip(axes[row], pick_frames(ds, n), strict=False):  # fewer frames than columns: blanks
             s = ds.load(key, masks=False, depth=False)
             ax.imshow(s.rgb)
-            ax.set_title(f"{name} {s.scene_id}/{s.im_id}\n" + caption(frame_view(s, _camera(ds, s))), fontsize=7.5)
-        axes[row][0].annotate(summary(ds, name), xy=(0.0, 1.0), xycoords="axes fraction", xytext=(0, 42),
+            ax.set_title(f"{name} {s.scene_id}/{s.im_id}\n" + caption(frame_view(s, _camera(ds, s), ref)),
+                         fontsize=7.5)
+        axes[row][0].annotate(summary(ds, name, ref), xy=(0.0, 1.0), xycoords="axes fraction", xytext=(0, 42),
                               textcoords="offset points", fontsize=8.5, fontweight="bold", va="bottom")
     fig.subplots_adjust(left=0.02, right=0.98, top=0.86, bottom=0.02, hspace=0.62, wspace=0.05)
     return fig
