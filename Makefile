@@ -8,6 +8,7 @@
 #                   files keyed by their inputs, so an interrupted run resumes; `make -n reproduce` prints the plan
 #   make ycbv       PROFILE=cpu|paper: only the synthetic-to-real branch (networks trained on generated
 #                   YCB-Video data, scored on YCBV_REAL's real frames)
+#   make fig2       Fig. 2 of PROFILE alone (figures/PROFILE/fig2_lmo_vs_ours.png: LM-O frames beside the training data's)
 #   make paper      the write-up PDF of PROFILE (paper/build/PROFILE/paper.pdf, copied to paper/paper.pdf)
 #   make benchmark  the benchmark scripts (print their figures, write them to results/)
 #   make results-readme  rewrite the README's generated tables from results/ (results-check: only compare)
@@ -38,7 +39,8 @@ PROFILE ?= paper
 include mk/profiles.mk
 include mk/reproduce.mk
 
-.PHONY: setup apt venv lint test test-fast notebooks-sync demo smoke reproduce evaluations ycbv paper tables benchmark results-readme \
+.PHONY: setup apt venv lint test test-fast notebooks-sync demo smoke reproduce evaluations ycbv paper tables fig2 benchmark \
+	results-readme \
 	results-check
 .DELETE_ON_ERROR:
 
@@ -109,6 +111,8 @@ endif
 
 # the tables and figures of notebook 07 (Tables I-III, per object, Fig. 7, accuracy vs threshold)
 tables: $(TEX_OUT) $(FIG_OUT)
+
+fig2: $(FIG2)
 
 paper: $(if $(HAVE_LATEX),$(PDF_DIR)/paper.pdf)
 

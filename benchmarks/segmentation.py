@@ -75,6 +75,26 @@ def bench_device(seg, rgbs: list, batch_size: int, warmup: int) -> dict:
     return out
 
 
+def untrained_checkpoint(profile: str, ds, path: Path, seed: int = 0) -> tuple[Path, str]:
+    """Write a randomly initialised Mask R-CNN of the segmentation ``profile`` (no pretrained weights; the
+    classes of the dataset reader ``ds``) as a checkpoint at ``path``; returns ``(path, label)``."""
+    import torch
+
+    from sixdpose.runs import save_checkpoint
+    from sixdpose.segmentation import checkpoint as ck
+    from sixdpose.segmentation.config import profile_config
+    from sixdpose.segmentation.data import ClassMap
+    from sixdpose.segmentation.model import build_model
+
+    cfg = profile_config(profile, pretrained=False)
+    classes = ClassMap.from_dataset(ds)
+    torch.manual_seed(seed)
+    model, init = build_model(cfg, len(classes))
+    save_checkpoint({"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "config": cfg.to_dict(),
+                     "classes": classes.to_list(), "init": init, "epoch": 0, "model": model.state_dict()}, path)
+    return path, f"untrained {profile} model ({cfg.backbone}, {len(classes)} classes, random weights)"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark and print one line per device (and JSON with ``--json``)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -99,12 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     from sixdpose.datasets import open_dataset
-    from sixdpose.runs import save_checkpoint
-    from sixdpose.segmentation import checkpoint as ck
-    from sixdpose.segmentation.config import profile_config
-    from sixdpose.segmentation.data import ClassMap
     from sixdpose.segmentation.infer import Segmenter
-    from sixdpose.segmentation.model import build_model
 
     if args.threads:
         torch.set_num_threads(args.threads)
@@ -119,14 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     ckpt = args.ckpt
     label = f"checkpoint {ckpt}"
     if ckpt is None:
-        cfg = profile_config(args.profile, pretrained=False)
-        classes = ClassMap.from_dataset(ds)
-        torch.manual_seed(0)
-        model, init = build_model(cfg, len(classes))
-        ckpt = Path(tmp.name) / "model.pt"
-        save_checkpoint({"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "config": cfg.to_dict(),
-                        "classes": classes.to_list(), "init": init, "epoch": 0, "model": model.state_dict()}, ckpt)
-        label = f"untrained {args.profile} model ({cfg.backbone}, {len(classes)} classes)"
+        ckpt, label = untrained_checkpoint(args.profile, ds, Path(tmp.name) / "model.pt")
     results = []
     for dev in [d.strip() for d in args.devices.split(",") if d.strip()]:
         if dev.startswith("cuda") and not torch.cuda.is_available():

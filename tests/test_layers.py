@@ -442,7 +442,15 @@ PROFILES_MK = make_variables(ROOT / "mk" / "profiles.mk")
 
 
 def test_mk_method_lists_are_the_registry():
-    assert MK["ALL_HYBRID"].split() == [m.key for m in registry.METHODS if m.kind == "hybrid"]
+    hybrid = [m for m in registry.METHODS if m.kind == "hybrid"]
+    assert MK["ALL_HYBRID"].split() == [m.key for m in hybrid if m.preset == "default"]
+    # the paper-settings reruns: the same algorithm and ICP as one of ours, with --preset paper
+    assert MK["PAPER_HYBRID"].split() == [m.key for m in hybrid if m.preset == "paper"]
+    for m in hybrid:
+        if m.preset == "paper":
+            ours = registry.METHOD[m.key.removesuffix("_paper")]
+            assert m.command == ours.command + " --preset paper" and ours.paper_acc, m.key
+    assert {m.preset for m in registry.METHODS if m.kind == "learned"} == {"default"}
     assert MK["ALL_LEARNED"].split() == [m.key for m in registry.METHODS if m.kind == "learned"]
     assert MK["FEW_METHODS"].split() == [m.key for m in registry.METHODS if m.few]
     assert {m.kind for m in registry.METHODS} == {"hybrid", "learned"}

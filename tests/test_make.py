@@ -55,17 +55,26 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
         if "--data ../shared/data/ycbv_sample" in line
     ]
     evals = [line for line in _lines(out, "evaluate") if "ycbv_sample" not in line and kinect not in line]
-    assert len(poses) == 40 and len(evals) == 40  # 10 methods x 2 splits x 2 mask sources
+    # 10 methods x 2 splits x 2 mask sources, + at cpu and paper the 3 hybrid rows with the paper's settings
+    paper_rows = [line for line in poses if "--preset paper" in line]
+    assert len(paper_rows) == (12 if ycbv else 0)
+    assert len(poses) == 40 + len(paper_rows) and len(evals) == len(poses)
+    assert sorted({re.search(r"_(?:gt|pred)_(\w+_paper)\.csv", line).group(1) for line in paper_rows}) == \
+        (["fgr_icp_paper", "ransac_icp_paper", "super4pcs_paper"] if ycbv else [])
+    assert all(line.startswith(".venv/bin/sixdpose register ") for line in paper_rows)
     sensor = [line for line in _lines(out, "evaluate") if f"--data {kinect} " in line]
     assert sorted(re.search(r"--result-name (\S+)", line).group(1) for line in sensor) == \
         ["test_kinect_gt_ransac_icp", "test_kinect_gt_super4pcs_icp"]
     kinect_gen = f".venv/bin/sixdpose generate --profile {splits[0][5:]} --set sensor=kinect --out {kinect} "
     assert any(line.startswith(kinect_gen) for line in _lines(out, "generate"))
-    assert len(real) == (15 if ycbv else 0) and len(_lines(out, "evaluate")) == len(evals) + len(real) + 2
+    # paper: the pair trained "twice as long" would be the base pair again (the paper profile both times): left out
+    n_real = {"cpu": 15, "paper": 13}.get(profile, 0)
+    assert len(real) == n_real and len(_lines(out, "evaluate")) == len(evals) + len(real) + 2
     assert ({"data/ycbv", "data/ycbv_ideal"} <= gen) == ycbv
     # without the branch, notebook 09's smoke network and refiner on a tiny ycbv dataset
     assert (f"data/ycbv_{profile}" in gen) == (not ycbv)
-    assert len([line for line in _lines(out, "train-pose") if "pose_ycbv" in line]) == (6 if ycbv else 1)
+    assert len([line for line in _lines(out, "train-pose") if "pose_ycbv" in line]) == \
+        {"cpu": 6, "paper": 4}.get(profile, 1)
     assert len([line for line in _lines(out, "train-refiner") if "refiner_ycbv" in line]) == (2 if ycbv else 1)
     # notebook 05's ablation: one pose-ablation command writing results/P/pose_ablation_P.json
     ablation = re.findall(r"sixdpose pose-ablation (.*?)--result-name (\S+) --results-dir (\S+)",
@@ -73,10 +82,10 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
     assert len(ablation) == 1 and ablation[0][1:] == (f"pose_ablation_{profile}", f"results/{profile}")
     assert ("--val data/val" in ablation[0][0]) == (profile in ("cpu", "paper"))
     long = [line for line in _lines(out, "train-pose") if "_e12" in line]  # the pair trained twice as long
-    assert len(long) == (2 if ycbv else 0) and all(
+    assert len(long) == (2 if profile == "cpu" else 0) and all(
         ("--epochs 12" in line) == (profile == "cpu") or "--resume" in line for line in long)
     assert all(f"--results-dir results/{profile}" in line for line in _lines(out, "evaluate"))
-    assert sum("--masks gt --min-px 400" in line for line in poses) == 12
+    assert sum("--masks gt --min-px 400" in line for line in poses) == 12 + len(paper_rows) // 2
     # every notebook reads what make wrote: no notebook trains, generates or writes a result
     assert "SEG_PROFILE" not in out
     assert len(re.findall(r"-m papermill .*notebooks/0\d_\w+\.ipynb notebooks/executed/" + profile, out)) == 9
@@ -103,3 +112,40 @@ def test_profile_errors_are_one_line():
     assert p.returncode != 0 and "PROFILE=laptop: use one of smoke demo cpu paper" in p.stderr
     p = _plan("demo", "PROFILE=cpu")
     assert p.returncode != 0 and "make demo is PROFILE=demo" in p.stderr
+
+
+_TRAIN = re.compile(r"\.venv/bin/sixdpose (train-seg|train-pose|train-refiner|pose-ablation) (.*)")
+
+
+def trainings(out: str) -> dict[str, list[str]]:
+    """Every training command of a ``make -n`` plan (continuation lines joined), keyed by what it trains:
+    the command and its arguments without ``--out`` and ``--no-progress`` (same key: the same network);
+    the values are the ``--out`` directories."""
+    found: dict[str, list[str]] = {}
+    for line in out.replace("\\\n", " ").splitlines():
+        m = _TRAIN.search(line)
+        if m is None:
+            continue
+        args = " ".join(m.group(2).split())
+        outdir = re.search(r"--out (\S+)", args).group(1)
+        key = m.group(1) + " " + " ".join(re.sub(r"--out \S+|--no-progress", " ", args).split())
+        found.setdefault(key, []).append(outdir)
+    return found
+
+
+@pytest.mark.parametrize("profile", ["paper", "cpu", "demo", "smoke"])
+def test_no_two_targets_train_the_same_network(profile):
+    p = _plan("reproduce", f"PROFILE={profile}")
+    assert p.returncode == 0, p.stderr
+    found = trainings(p.stdout)
+    assert len(found) >= 4  # seg, pose, refiner, ablation at least
+    same = {k: v for k, v in found.items() if len(v) > 1}
+    assert not same, f"targets training the same network (same data and config): {same}"
+
+
+def test_the_duplicate_check_finds_a_duplicate():
+    plan = (".venv/bin/sixdpose train-pose --data data/ycbv --out runs/p/a --no-progress --profile paper\n"
+            ".venv/bin/sixdpose train-pose --data data/ycbv --out runs/p/b --no-progress \\\n  --profile paper\n"
+            ".venv/bin/sixdpose train-pose --data data/ycbv --out runs/p/c --no-progress --profile paper --set x=1\n")
+    found = trainings(plan)
+    assert sorted(found.values(), key=len) == [["runs/p/c"], ["runs/p/a", "runs/p/b"]]

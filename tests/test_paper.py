@@ -134,11 +134,15 @@ def test_the_write_up_builds_from_generated_files(tmp_path, lmo):
             report.write_per_object(e, s, k, fig / "p.csv", gen / f"per_object_{s}_{k}.tex")
     report.write_real_table(res, fig / "real.csv", gen / "table_real.tex")  # no results: the "not run" row
     report.write_ablation_table(res, "smoke", fig / "abl.csv", gen / "table_ablation.tex")
+    report.write_table2_e2e(res, fig / "t2e.csv", gen / "table2_e2e.tex")  # no benchmark: the "not run" row
+    from sixdpose.reporting.claims import write_claims
+
+    write_claims(res, "smoke", fig / "claims.csv", gen / "claims.tex")
     report.write_macros(e, "smoke", gen / "macros.tex",
                         extra={**report.dataset_values(e, tmp_path), **report.beyond_findings(res, "smoke")})
     (fig / "stats.csv").write_text("quantity,paper,this dataset\nimages,\"25,000\",6\n")
     report.dataset_table(fig / "stats.csv", gen / "table_dataset.tex")
-    for png in ("fig3_random_images.png", "fig7.png", "accuracy_threshold.png"):
+    for png in ("fig2_lmo_vs_ours.png", "fig3_random_images.png", "fig7.png", "accuracy_threshold.png"):
         report.placeholder_figure(png).savefig(fig / png)
     out = tmp_path / "build"
     env = {"TEXINPUTS": f"{gen}//:{fig}//:", "PATH": "/usr/bin:/bin"}

@@ -24,6 +24,9 @@ class Method:
         paper_acc: the paper's row label in Tables I and III (None: the paper has no such row).
         paper_fps: the paper's row label in Table II (None: no such row).
         few: one of the short list run by the ``smoke`` profile (mk ``FEW_METHODS``).
+        preset: the registration preset of a hybrid method: ``default`` (ours, tuned on the validation
+            split) or ``paper`` (the paper's section IV-B settings, ``register --preset paper``: the
+            "paper settings, rerun" rows, mk ``PAPER_HYBRID``, run where the profile's ``PAPER_ROWS`` is yes).
     """
 
     key: str
@@ -33,9 +36,14 @@ class Method:
     paper_acc: str | None = None
     paper_fps: str | None = None
     few: bool = False
+    preset: str = "default"
 
 
-#: The methods of the graph, in table order.
+#: The hybrid methods of the graph rerun with the paper's own settings (``--preset paper``): the paper's
+#: Table III rows (RANSAC + ICP, FGR + ICP, Super4PCS) as (key of ours, label).
+_PAPER_ROWS = (("ransac_icp", "RANSAC + ICP"), ("fgr_icp", "FGR + ICP"), ("super4pcs", "Super4PCS"))
+
+#: The methods of the graph, in table order (ours, tuned; the paper-settings reruns; the learned ones).
 METHODS: tuple[Method, ...] = (
     Method("ransac", "RANSAC", "hybrid", "register --method ransac"),
     Method("ransac_icp", "RANSAC + ICP", "hybrid", "register --method ransac --icp", "Ours Hybrid(RANSAC + ICP)",
@@ -45,6 +53,10 @@ METHODS: tuple[Method, ...] = (
     Method("super4pcs", "Super4PCS", "hybrid", "register --method super4pcs", "Ours Hybrid(Super4PCS)",
            "Ours Hybrid(Super4PCS)", few=True),
     Method("super4pcs_icp", "Super4PCS + ICP", "hybrid", "register --method super4pcs --icp"),
+    *(Method(f"{key}_paper", f"{label} (paper settings, rerun)", "hybrid",
+             "register --method " + key.replace("_icp", "") + (" --icp" if key.endswith("_icp") else "")
+             + " --preset paper", preset="paper")
+      for key, label in _PAPER_ROWS),
     Method("learned_it0", "learned, no refinement", "learned", "predict-pose --pose {runs}/pose --iterations 0",
            "Ours Full Learning (No Refinement)", "Ours Full Learning (No Refinement)", few=True),
     Method("learned_it2", "learned + 2 refinement it.", "learned",

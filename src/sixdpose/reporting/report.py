@@ -111,12 +111,20 @@ TABLE3_COLUMNS = (("single_pred", "single", "pred", "single, pred."), ("single_g
                   ("test_pred", "test", "pred", "multi, pred."), ("test_gt", "test", "gt", "multi, GT"))
 
 
+def _shown(entries: dict, splits) -> list[Method]:
+    """The methods of a table on ``splits``: every one of ours, and a paper-settings rerun (``preset``
+    ``paper``) only where one of its results on those splits exists."""
+    return [m for m in METHODS
+            if m.preset != "paper" or any(k[0] in splits and k[2] == m.key for k in entries)]
+
+
 def table3(entries: dict) -> list[dict]:
     """Table III: ADD(-S) % of every method on our generated data. Columns ``paper`` (the paper's Table
     III: its own dataset, predicted masks, single-instance subset) and, ours, ``single_pred`` (the
-    paper's setting), ``single_gt``, ``test_pred``, ``test_gt`` (multi-instance split)."""
+    paper's setting), ``single_gt``, ``test_pred``, ``test_gt`` (multi-instance split). The paper-settings reruns
+    (``preset == "paper"``) are rows only where one of their results exists."""
     rows = []
-    for m in METHODS:
+    for m in _shown(entries, ("test", "single")):
         row = {"method": m.label, "paper": TABLES["III"].rows.get(m.paper_acc) if m.paper_acc else None}
         for col, split, masks, _ in TABLE3_COLUMNS:
             row[col] = _acc(entries, split, masks, m.key)
@@ -157,7 +165,7 @@ def table2(entries: dict, split: str = "test") -> list[dict]:
     measured by ``register`` / ``predict-pose`` (disk reads excluded, segmentation not included)."""
     letters = machines(entries)
     rows = []
-    for m in METHODS:
+    for m in _shown(entries, (split,)):
         row = {"method": m.label, "paper": TABLES["II"].rows.get(m.paper_fps) if m.paper_fps else None}
         hw = []
         for masks in MASKS:
@@ -265,7 +273,9 @@ def write_per_object(entries: dict, split: str, masks: str, csv_path, tex_path) 
     two = "\\shortstack[r]{{{}\\\\{}}}".format  # a header on two lines keeps the columns as narrow as the numbers
     short = {"ransac": "RANSAC", "ransac_icp": two("RANSAC", "+ICP"), "fgr": "FGR", "fgr_icp": two("FGR", "+ICP"),
              "super4pcs": "S4PCS", "super4pcs_icp": two("S4PCS", "+ICP"), "learned_it0": "L0", "learned_it2": "L2",
-             "learned_it2_icp": two("L2", "+ICP"), "learned_it2_colour": two("L2", "+col.")}
+             "learned_it2_icp": two("L2", "+ICP"), "learned_it2_colour": two("L2", "+col."),
+             "ransac_icp_paper": two("RANSAC", "+ICP (p.)"), "fgr_icp_paper": two("FGR", "+ICP (p.)"),
+             "super4pcs_paper": two("S4PCS", "(p.)")}
     cols = ["obj_id", "name", "n_gt"] + [m.key for m in methods]
     write_table(
         [{c: r.get(c) for c in cols} for r in table],
@@ -448,9 +458,14 @@ def _def(name: str, value: str) -> str:
     return f"\\expandafter\\def\\csname {name}\\endcsname{{{value}}}"
 
 
-def _best(entries: dict, split: str, masks: str, kind: str) -> tuple[Method | None, float | None]:
+def _best(entries: dict, split: str, masks: str, kind: str,
+          preset: str = "default") -> tuple[Method | None, float | None]:
+    """The most accurate method of ``kind`` (hybrid ones of registration ``preset``; learned ones are all
+    ``default``) on ``split`` / ``masks`` and its accuracy (tied methods named together); ``(None, None)``
+    without results."""
     cands = [(e.figure("accuracy"), METHOD[m]) for (s, k, m), e in entries.items()
-             if s == split and k == masks and METHOD[m].kind == kind and e.figure("accuracy") is not None]
+             if s == split and k == masks and METHOD[m].kind == kind and METHOD[m].preset == preset
+             and e.figure("accuracy") is not None]
     if not cands:
         return None, None
     acc = max(c[0] for c in cands)
@@ -549,7 +564,8 @@ def findings(entries: dict) -> dict[str, str]:
     (single-instance against multi-instance, GT masks), ``masks`` (predicted against GT masks,
     single-instance), ``icp`` (hybrid methods with ICP against without), ``refine`` (2 refinement
     iterations against none), ``colour`` (colour verification after refinement), ``threshold`` (the paper's
-    setting at 5 and 20 % of the diameter)."""
+    setting at 5 and 20 % of the diameter), ``paper_settings`` (the hybrid rows rerun with the paper's
+    registration settings against ours, over every split and mask source where both ran)."""
     out = {}
     mh, ah = _best(entries, "single", "pred", "hybrid")
     ml, al = _best(entries, "single", "pred", "learned")
@@ -598,6 +614,13 @@ def findings(entries: dict) -> dict[str, str]:
         "with colour verification",
         "without (learned + 2 iterations, multi-instance split, GT masks)",
         "colour-verification",
+    )
+    out["paper_settings"] = mean_sentence(
+        [((s, k, m.key.removesuffix("_paper")), (s, k, m.key)) for m in METHODS if m.preset == "paper"
+         for s, k in (("single", "pred"), ("single", "gt"), ("test", "gt"), ("test", "pred"))],
+        "with the paper's registration settings (rerun)",
+        "with ours (tuned on the validation split)",
+        "paper-settings/ours",
     )
     best = entries.get(("single", "pred", mh.key)) if mh is not None else None
     if best is not None and best.curve is not None:
@@ -668,6 +691,65 @@ def write_real_table(results_dir: str | Path, csv_path, tex_path, name: str = "y
     return rows
 
 
+#: The result of ``benchmarks/table2_fps.py --out <results dir>/table2_fps.json``: Table II as the paper
+#: measured it (end-to-end, segmentation and every overhead included).
+TABLE2_BENCH = "table2_fps"
+
+
+def table2_e2e(results_dir: str | Path) -> list[dict]:
+    """Table II end to end: per method of the benchmark ``table2_fps`` (when it ran into ``results_dir``),
+    ``method`` (label), ``paper`` (the paper's Table II FPS, where it has the row), ``e2e_fps`` (Mask R-CNN
+    + the pose stage, disk reads excluded), ``pose_fps`` (the pose stage alone, GT masks), ``seg_ms``
+    (Mask R-CNN per frame), ``instances`` (per frame). Empty when the benchmark has not run there.
+
+    Raises:
+        ReportError: a row names no method of :data:`sixdpose.registry.METHODS` (one line naming the file).
+    """
+    r = _optional(results_dir, TABLE2_BENCH)
+    if r is None:
+        return []
+    rows = []
+    for row in r.rows:
+        m = METHOD.get(str(row.get("method")))
+        if m is None:
+            raise ReportError(f"{r.path}: method {row.get('method')!r} is not a method of the graph")
+        n = row.get("frames") or 0
+        rows.append({"method": m.label, "paper": TABLES["II"].rows.get(m.paper_fps) if m.paper_fps else None,
+                     "e2e_fps": row.get("e2e_fps"), "pose_fps": row.get("pose_fps"),
+                     "seg_ms": row.get("seg_ms_per_frame"),
+                     "instances": (row.get("instances") or 0) / n if n else None})
+    return rows
+
+
+def write_table2_e2e(results_dir: str | Path, csv_path, tex_path) -> list[dict]:
+    """Write :func:`table2_e2e` as CSV and LaTeX (one row saying how to run it when it has not run); returns
+    its rows."""
+    rows = table2_e2e(results_dir)
+    table = rows or [{"method": "not run (python benchmarks/table2_fps.py --out RESULTS/table2_fps.json)",
+                      "paper": None, "e2e_fps": None, "pose_fps": None, "seg_ms": None, "instances": None}]
+    write_table(table, ["method", "paper", "e2e_fps", "pose_fps", "seg_ms", "instances"], csv_path, tex_path,
+                headers=["Method", "Table II FPS", "end-to-end FPS", "pose-stage FPS", "Mask R-CNN ms",
+                         "inst./frame"], align="lrrrrr", digits=3,
+                comment=f"generated by sixdpose.evaluation.report from {TABLE2_BENCH} ({len(rows)} rows)")
+    return rows
+
+
+def table2_e2e_note(results_dir: str | Path) -> str:
+    """One sentence on how the end-to-end Table II was measured (frames, data, networks, machine, date),
+    or that it has not run; for the write-up's ``\\val{finding@fps_e2e}``."""
+    r = _optional(results_dir, TABLE2_BENCH)
+    if r is None:
+        return ("The end-to-end benchmark has not run at this profile (python benchmarks/table2_fps.py --out "
+                "results/<profile>/table2_fps.json), so the table is empty.")
+    c = r.config or {}
+    frames = max((row.get("frames") or 0 for row in r.rows), default=0)
+    return (f"Measured by benchmarks/table2_fps.py on {frames} frames of {Path(str(c.get('data', '?'))).name} "
+            f"({c.get('split', '?')}), loaded into memory first; Mask R-CNN: {c.get('segmentation', '?')}; "
+            f"learned networks: {c.get('pose', '?')}; registration preset {c.get('preset', '?')}; on "
+            f"{machine_text(r.provenance)}, {str(r.provenance.get('date', '?'))[:10]}"
+            + (f" ({r.notes})." if r.notes else "."))
+
+
 #: Columns of the ablation table (the ``sixdpose pose-ablation`` result ``pose_ablation_<profile>``).
 ABLATION_COLUMNS = ("variant", "translation", "rotation", "norm", "steps", "train_seconds", "val_add", "n_val")
 
@@ -689,9 +771,10 @@ def write_ablation_table(results_dir: str | Path, profile: str, csv_path, tex_pa
 
 
 def beyond_findings(results_dir: str | Path, profile: str, name: str = "ycbv") -> dict[str, str]:
-    """Sentences for the write-up on the real frames (``finding@real``, ``finding@sensor``) and the ablation
-    (``finding@ablation``), computed from the result files. Each is a whole sentence (or empty where it
-    has nothing to compare), saying so where the profile did not run the results it needs."""
+    """Sentences for the write-up on the real frames (``finding@real``, ``finding@sensor``), the ablation
+    (``finding@ablation``) and the end-to-end Table II (``finding@fps_e2e``, :func:`table2_e2e_note`),
+    computed from the result files. Each is a whole sentence (or empty where it has nothing to compare),
+    saying so where the profile did not run the results it needs."""
     out = {}
     real = {m.key: _optional(results_dir, f"{name}_gt_{m.key}") for m in REAL_METHODS}
     acc = {k: (r.figures.get("accuracy") if r else None) for k, r in real.items()}
@@ -728,6 +811,7 @@ def beyond_findings(results_dir: str | Path, profile: str, name: str = "ycbv") -
         out["sensor"] = s
     else:
         out["sensor"] = ""
+    out["fps_e2e"] = table2_e2e_note(results_dir)
     rows = ablation_table(results_dir, profile)
     scored = [r for r in rows if r.get("val_add") is not None]
     if scored:
