@@ -12,6 +12,7 @@
 #   make paper      the write-up PDF of PROFILE (paper/build/PROFILE/paper.pdf, copied to paper/paper.pdf)
 #   make benchmark  the benchmark scripts (print their figures, write them to results/)
 #   make results-readme  rewrite the README's generated tables from results/ (results-check: only compare)
+#   make lab        JupyterLab on notebooks/ (the NN_*.py sources open as notebooks); LAB_ARGS="--port 8890 ..."
 
 SHELL := /bin/bash
 PYTHON_SYS ?= python3
@@ -41,7 +42,7 @@ include mk/reproduce.mk
 
 .PHONY: setup apt venv lint test test-fast notebooks-sync demo smoke reproduce evaluations ycbv paper tables fig2 benchmark \
 	results-readme \
-	results-check
+	results-check lab
 .DELETE_ON_ERROR:
 
 setup: apt venv
@@ -86,6 +87,16 @@ test-fast: setup
 # notebooks/NN_*.py (jupytext percent format) are the sources; the .ipynb twins are written from them
 notebooks-sync: setup
 	@for f in notebooks/[0-9]*.py; do $(VENV)/bin/jupytext --quiet --to ipynb --update "$$f"; done
+
+# the reader's workbench: JupyterLab with the repository as its root, opened on notebooks/; jupytext's contents
+# manager opens the NN_*.py sources as notebooks (saving one writes the .py; `make notebooks-sync` updates the
+# .ipynb twins). As root (a container) --allow-root. LAB_ARGS: more jupyter-lab options (--port 8890, --no-browser,
+# --IdentityProvider.token=...)
+LAB_ARGS ?=
+lab: setup
+	$(VENV)/bin/jupyter lab --ServerApp.root_dir=. --LabApp.default_url=/lab/tree/notebooks \
+	  --ServerApp.contents_manager_class=jupytext.AsyncTextFileContentsManager \
+	  $$([ "$$(id -u)" = 0 ] && echo --allow-root) $(LAB_ARGS)
 
 # the graph (mk/reproduce.mk): every result, table, figure and executed notebook of PROFILE, and the PDF
 # when LaTeX is installed
