@@ -382,6 +382,8 @@ RAW_WRITE_ALLOWED = {
                                    "truncates it atomically with truncate_metrics)",
     ("assets/fetch.py", "_download"): "streams a download into the staging directory of fetch_ycb",
     ("assets/fetch.py", "_unpack"): "converts a texture inside the staging directory of fetch_ycb",
+    ("assets/weights.py", "_stream"): "streams a download into <file>.part (resumable), checked by fetch_weights "
+                                      "and moved into place with os.replace",
     ("assets/bop.py", "convert_bop_model"): "writes a mkdtemp directory that os.replace moves into place",
     ("generation/writer.py", "commit_scene"): "writes the scene's staging directory, then os.replace per file",
 }

@@ -284,8 +284,8 @@ def test_flags_of_config_fields_have_the_config_bounds():
 # ---------------------------------------------------------------------------------------- spellings
 
 #: Long-running commands: each has --no-progress.
-LONG = {"generate", "fetch-ycb", "export-bop", "train-seg", "segment", "eval-seg", "register", "train-pose",
-        "train-refiner", "predict-pose", "pose-ablation", "evaluate"}
+LONG = {"generate", "fetch-ycb", "fetch-weights", "export-bop", "train-seg", "segment", "eval-seg", "register",
+        "train-pose", "train-refiner", "predict-pose", "pose-ablation", "evaluate"}
 
 
 def test_one_spelling_and_one_default_per_concept():

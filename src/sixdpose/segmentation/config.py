@@ -46,7 +46,8 @@ class SegConfig(TrainSchedule):
     Model:
         backbone: ``resnet50`` (paper), ``resnet34`` or ``resnet18``.
         pretrained: initialise the backbone with ImageNet weights if they are in the local torch hub
-            cache (never downloaded); otherwise random initialisation, said in one line.
+            cache (never downloaded here; ``sixdpose fetch-weights`` puts them there); otherwise random
+            initialisation, said in one line.
         trainable_layers: backbone stages left trainable (5 = none frozen, as the paper).
         fpn_channels: FPN output channels (torchvision default 256).
         box_head_dim: hidden size of the two-layer box head (torchvision default 1024).

@@ -3,7 +3,8 @@
 With the ``paper`` config (ResNet-50, 256 FPN channels, default heads) the network is exactly
 torchvision's ``maskrcnn_resnet50_fpn`` with ``num_classes = n_objects + 1`` and
 ``trainable_backbone_layers=5``. Pretrained ImageNet weights are taken from the local torch hub cache
-only (``$TORCH_HOME/hub/checkpoints``); this module never downloads anything.
+only (``$TORCH_HOME/hub/checkpoints``, where ``sixdpose fetch-weights`` puts them); this module never
+downloads anything.
 """
 
 from __future__ import annotations
@@ -12,26 +13,10 @@ import logging
 import os
 from collections import OrderedDict
 
-import torch
 from torch import nn
 
+from ..assets.weights import cached_weights_path, imagenet_weights
 from .config import SegConfig
-
-
-def _weights_enum(backbone: str):
-    from torchvision.models import ResNet18_Weights, ResNet34_Weights, ResNet50_Weights
-
-    return {
-        "resnet18": ResNet18_Weights.IMAGENET1K_V1,
-        "resnet34": ResNet34_Weights.IMAGENET1K_V1,
-        "resnet50": ResNet50_Weights.IMAGENET1K_V1,
-    }[backbone]
-
-
-def cached_weights_path(backbone: str) -> str:
-    """Where torchvision's ImageNet weights of ``backbone`` live in the local torch hub cache."""
-    url = _weights_enum(backbone).url
-    return os.path.join(torch.hub.get_dir(), "checkpoints", os.path.basename(url))
 
 
 def build_model(
@@ -70,14 +55,15 @@ def build_model(
         if cfg.pretrained:
             path = cached_weights_path(cfg.backbone)
             if os.path.isfile(path):
-                weights = _weights_enum(cfg.backbone)
+                weights = imagenet_weights(cfg.backbone)
                 init = "imagenet"
             elif verbose:
                 logging.getLogger("sixdpose").warning(
-                    "ImageNet weights for %s not in the local torch hub cache (%s); offline, so training "
-                    "starts from random initialisation",
+                    "ImageNet weights for %s not in the local torch hub cache (%s; `sixdpose fetch-weights "
+                    "--backbone %s` downloads them); training starts from random initialisation",
                     cfg.backbone,
                     path,
+                    cfg.backbone,
                 )
     elif init not in ("imagenet", "random"):
         raise ValueError(f"init must be 'imagenet' or 'random', not {init!r}")
