@@ -31,6 +31,9 @@
 #               on the generated `ycbv` / `ycbv_ideal` data, scored with the hybrid methods on the real
 #               YCB-Video frames of YCBV_REAL; no = the graph trains notebook 09's smoke network on 6 generated
 #               images (a pipeline check)
+#   IMAGENET    the backbone whose ImageNet weights `sixdpose fetch-weights` puts in the torch hub cache before
+#               train-seg (the `paper` segmentation profile starts from them; - : none, the smoke and cpu profiles
+#               train from random initialisation)
 
 PROFILES   := smoke        demo         cpu          paper
 TRAIN_GEN  := smoke        demo         train        paper
@@ -44,6 +47,7 @@ LIMIT      := 0            0            0            0
 NB04       := 2            2            20           100
 PAPER_ROWS := no           no           yes          yes
 YCBV       := no           no           yes          yes
+IMAGENET   := -            -            -            resnet50
 
 # train-pose / train-refiner arguments of the synthetic-to-real networks where YCBV is yes. cpu: the cpu
 # profiles for a fixed 6 epochs (1,800 steps) instead of their 40- and 15-minute budgets, so the networks
@@ -83,6 +87,7 @@ P_LIMIT      := $(call _col,LIMIT)
 P_NB04       := $(call _col,NB04)
 P_PAPER_ROWS := $(call _col,PAPER_ROWS)
 P_YCBV       := $(call _col,YCBV)
+P_IMAGENET   := $(filter-out -,$(call _col,IMAGENET))
 
 # ---- paths of $(PROFILE) ----
 TRAIN_DIR  := data/$(P_TRAIN_GEN)

@@ -47,9 +47,22 @@ DATASETS := $(sort $(P_TRAIN_GEN) $(P_TEST_GEN) $(P_SINGLE_GEN) $(P_VAL_GEN))
 $(foreach g,$(DATASETS),$(eval data/$(g)/manifest.json: | $(VENV_OK) ; \
 	$(SIXDPOSE) generate --profile $(g) --out data/$(g) --workers $(WORKERS) --no-progress))
 
+# ---- ImageNet weights (profiles with an IMAGENET backbone: paper) --------------------------------
+# train-seg never downloads: it starts from ImageNet weights only when torchvision's file is in the torch hub
+# cache, torch.hub.get_dir()/checkpoints/<the file name of the weights' URL> (get_dir: $TORCH_HOME/hub, by default
+# $XDG_CACHE_HOME/torch/hub or ~/.cache/torch/hub). fetch-weights puts it there (resumable, checksum-checked);
+# tests/test_make.py checks that this is the path torch and the segmentation stage use
+TORCH_HUB := $(or $(TORCH_HOME),$(or $(XDG_CACHE_HOME),$(HOME)/.cache)/torch)/hub
+IMAGENET_FILE_resnet50 := resnet50-0676ba61.pth
+IMAGENET_WEIGHTS := $(if $(P_IMAGENET),$(TORCH_HUB)/checkpoints/$(IMAGENET_FILE_$(P_IMAGENET)))
+ifneq ($(P_IMAGENET),)
+$(IMAGENET_WEIGHTS): | $(VENV_OK)
+	$(SIXDPOSE) fetch-weights --backbone $(P_IMAGENET) --no-progress
+endif
+
 # ---- segmentation ------------------------------------------------------------------------------
 # train-seg writes model.pt last; an interrupted run (last.pt only) is resumed
-$(RUNS)/seg/model.pt: $(TRAIN_DIR)/manifest.json | $(VENV_OK)
+$(RUNS)/seg/model.pt: $(TRAIN_DIR)/manifest.json | $(VENV_OK) $(IMAGENET_WEIGHTS)
 	$(SIXDPOSE) train-seg --data $(TRAIN_DIR) --out $(@D) --no-progress \
 	  $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_SEG))
 
@@ -126,8 +139,8 @@ $(foreach m,$(KINECT_METHODS),$(eval $(call pose_rule,test_kinect,gt,$(m))))
 KINECT_RESULTS := $(foreach m,$(KINECT_METHODS),$(RES)/test_kinect_gt_$(m).json)
 
 # the stages in the order of the plan (`make -n reproduce` lists them so)
-STAGES = $(foreach g,$(DATASETS),data/$(g)/manifest.json) $(DATA_test_kinect)/manifest.json $(RUNS)/seg/model.pt \
-	$(RUNS)/pose/model.pt $(RUNS)/refiner/model.pt $(RUNS)/masks/test/meta.json $(RUNS)/masks/single/meta.json \
+STAGES = $(IMAGENET_WEIGHTS) $(foreach g,$(DATASETS),data/$(g)/manifest.json) $(DATA_test_kinect)/manifest.json \
+	$(RUNS)/seg/model.pt $(RUNS)/pose/model.pt $(RUNS)/refiner/model.pt $(RUNS)/masks/test/meta.json $(RUNS)/masks/single/meta.json \
 	$(RUNS)/seg/pred_test/meta.json $(YCBV_STAGES)
 # results of record: every split x masks x method, the kinect rows and the ablation
 RESULTS := $(foreach s,$(SPLITS),$(foreach k,$(MASKS),$(foreach m,$(METHODS),$(RES)/$(s)_$(k)_$(m).json))) \
@@ -222,7 +235,7 @@ endif
 # ---- LM-O (Table I): only with LMO=/path/to/lmo (a full BOP LM-O with depth and masks) ----------
 ifneq ($(strip $(LMO)),)
 DATA_lmo := $(LMO)
-$(RUNS)/lmo_seg/model.pt: | $(VENV_OK)
+$(RUNS)/lmo_seg/model.pt: | $(VENV_OK) $(IMAGENET_WEIGHTS)
 	$(SIXDPOSE) train-seg --data $(LMO) --train-split $(LMO_TRAIN_SPLIT) --test-split $(LMO_SPLIT) --out $(@D) \
 	  --no-progress $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_SEG))
 $(RUNS)/masks/lmo/meta.json: $(RUNS)/lmo_seg/model.pt

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -14,10 +15,10 @@ REPO = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.skipif(shutil.which("make") is None, reason="GNU make not installed")
 
 
-def _plan(*args: str) -> subprocess.CompletedProcess:
+def _plan(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
     # -B: every target out of date, so the plan is the whole graph whatever this checkout holds
     return subprocess.run(
-        ["make", "-nB", "--no-print-directory", *args], cwd=REPO, capture_output=True, text=True, timeout=120
+        ["make", "-nB", "--no-print-directory", *args], cwd=REPO, capture_output=True, text=True, timeout=120, env=env
     )
 
 
@@ -93,6 +94,37 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
     # stages in the order of the pipeline: datasets, training, masks, then poses
     first = [out.index(s) for s in ("sixdpose generate", "sixdpose train-seg", "sixdpose segment", "sixdpose register")]
     assert first == sorted(first)
+
+
+@pytest.mark.parametrize("profile", ["paper", "cpu", "demo", "smoke"])
+def test_only_the_paper_profile_fetches_imagenet_weights_first(profile):
+    out = _plan("reproduce", f"PROFILE={profile}").stdout
+    fetch = ".venv/bin/sixdpose fetch-weights --backbone resnet50 --no-progress"
+    commands = [line for line in out.splitlines() if line.startswith(".venv/bin/sixdpose ")]
+    if profile == "paper":  # before anything else of the graph (train-seg starts from the weights)
+        assert commands[0] == fetch and out.count(fetch) == 1
+    else:
+        assert "fetch-weights" not in out
+
+
+@pytest.mark.parametrize("env", [{"TORCH_HOME": "{tmp}/th"}, {"XDG_CACHE_HOME": "{tmp}/xdg"}, {"HOME": "{tmp}/home"}])
+def test_the_weights_target_is_the_file_torch_and_train_seg_load(env, tmp_path, monkeypatch):
+    """mk/reproduce.mk's target for the ImageNet weights is the path torchvision (through torch.hub) and the
+    segmentation stage look at, under each way of placing the torch hub cache."""
+    from sixdpose.segmentation.model import cached_weights_path
+
+    environ = {k: v for k, v in os.environ.items() if k not in ("TORCH_HOME", "XDG_CACHE_HOME")}
+    environ.update({k: v.format(tmp=tmp_path) for k, v in env.items()})
+    for k in ("TORCH_HOME", "XDG_CACHE_HOME", "HOME"):
+        if k in environ:
+            monkeypatch.setenv(k, environ[k])
+        else:
+            monkeypatch.delenv(k, raising=False)
+    path = Path(cached_weights_path("resnet50"))
+    assert path.is_relative_to(tmp_path)
+    p = _plan(str(path), "PROFILE=paper", env=environ)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.splitlines()[-1] == ".venv/bin/sixdpose fetch-weights --backbone resnet50 --no-progress"
 
 
 def test_smoke_runs_a_few_methods_and_lmo_adds_table_1():
