@@ -14,6 +14,9 @@
 #                   to paper/paper.pdf); `make paper PROFILE=cpu` builds it from the committed results/cpu
 #   make fig2       Fig. 2 of PROFILE alone (figures/PROFILE/fig2_lmo_vs_ours.png: LM-O frames beside the training
 #                   data's), from the training data that is here (RECOMPUTE=yes generates it)
+#   make nbval      the executed notebooks with a reference (notebooks/reference/PROFILE/) run again under
+#                   pytest --nbval-lax: their `# NBVAL_CHECK_OUTPUT` cells must print what the reference holds
+#   make nbval-reference  record PROFILE's references from notebooks/executed/PROFILE/
 #   make benchmark  the benchmark scripts (print their figures, write them to results/)
 #   make results-readme  rewrite the README's generated tables from results/ (results-check: only compare)
 
@@ -44,7 +47,7 @@ include mk/profiles.mk
 include mk/reproduce.mk
 
 .PHONY: setup apt venv lint test test-fast notebooks-sync demo smoke reproduce evaluations ycbv paper tables fig2 benchmark \
-	results-readme results-check
+	results-readme results-check nbval nbval-reference
 .DELETE_ON_ERROR:
 
 setup: apt venv
@@ -73,12 +76,13 @@ $(VENV)/.synced: pyproject.toml uv.lock
 	@touch $@
 
 # CI: the tests, then the smoke graph (every notebook executed by papermill on the smoke profile, on
-# top of the smoke graph's datasets, runs and results), then the cpu write-up's tables from the committed
-# results (notebook 07, no stage)
+# top of the smoke graph's datasets, runs and results), the cpu write-up's tables from the committed
+# results (notebook 07, no stage), then nbval on the executed notebooks that have a reference
 test: setup lint
 	$(PY) -m pytest -p no:dash -q tests
 	$(MAKE) --no-print-directory smoke
 	$(MAKE) --no-print-directory tables PROFILE=cpu
+	$(MAKE) --no-print-directory nbval
 
 # ruff (rules in pyproject.toml) must be clean; mypy's error count may not grow past tools/mypy_baseline.txt
 lint: setup
@@ -116,11 +120,20 @@ endif
 
 # the tables, macros and figures of notebook 07 (Tables I-III, per object, accuracy vs threshold, the charts;
 # Fig. 7 where its dataset is here): from the result files that are here unless RECOMPUTE=yes (mk/reproduce.mk)
-tables: $(TEX_OUT) $(FIG_OUT)
+# (the executed notebook is a target too: on a fresh clone, where it is not, notebook 07 runs once)
+tables: $(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT)
 
 fig2: $(FIG2)
 
 paper: tables $(if $(HAVE_LATEX),$(PDF_DIR)/paper.pdf)
+
+# nbval (sixdpose.reporting.nbcheck): runs after the notebooks were executed (make test: the smoke graph and
+# `make tables PROFILE=cpu`); the notebooks it runs are written to build/nbval/
+nbval: setup
+	$(PY) -m sixdpose.reporting.nbcheck check --reference notebooks/reference --executed notebooks/executed --out build/nbval
+
+nbval-reference: setup
+	$(PY) -m sixdpose.reporting.nbcheck record --executed $(EXEC) --out notebooks/reference/$(PROFILE)
 
 BENCHMARKS := generation segmentation registration colour_robustness
 

@@ -199,3 +199,16 @@ report.write_macros(entries, PROFILE, tex / "macros.tex", extra={**sizes, **beyo
 print(report.write_dataset_table(figures / "dataset_statistics.csv", tex / "table_dataset.tex",
                                  FIGURE["fig3_random_images.png"].make.format(profile=PROFILE)))
 sizes  # noqa: B018 (the cell's displayed value)
+
+# %% [markdown]
+# ## What CI compares
+#
+# The cell below prints counts and table shapes only (no timing, no path); `make nbval` runs the executed
+# notebook again under `pytest --nbval-lax` and compares its output with `notebooks/reference/<profile>/`
+# (`sixdpose.reporting.nbcheck`), so a change that silently alters a table fails.
+
+# %%
+# NBVAL_CHECK_OUTPUT
+print(report.shape_summary(entries, {"Table III": t3, "Table I": t1, "Table II": t2, "Table II end to end": t2e,
+                                     **{f"per object {s} {k}": v for (s, k), v in per_object.items()},
+                                     "real frames": real, "ablation": ablation, "claims": claims}))

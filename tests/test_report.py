@@ -373,6 +373,16 @@ def test_dataset_values_and_table_kept_where_the_datasets_are_not_here(results, 
     assert "kept" in report.write_dataset_table(tmp_path / "stats.csv", tex, "make nb02") and tex.read_text() == text
 
 
+def test_shape_summary_counts_only(results):
+    e = report.load_entries(results)
+    text = report.shape_summary(e, {"Table III": report.table3(e), "empty": []})
+    assert text.splitlines()[0] == "9 evaluations"
+    assert "  single/pred: 3 (learned_it2, ransac_icp, super4pcs)" in text
+    assert re.search(r"^Table III: \d+ rows x 6 columns, \d+ cells filled$", text, re.M)
+    assert "empty: 0 rows x 0 columns, 0 cells filled" in text
+    assert not re.search(r"\d+\.\d", text)  # no figure, only counts
+
+
 def test_charts_from_results_alone(results, tmp_path):
     import matplotlib
 

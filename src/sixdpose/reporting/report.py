@@ -857,6 +857,25 @@ def beyond_findings(results_dir: str | Path, profile: str, name: str = "ycbv") -
     return {f"finding@{k}": v for k, v in out.items()}
 
 
+def shape_summary(entries: dict, tables: dict) -> str:
+    """Counts and shapes only (deterministic for given result files; no figure, time or path): the
+    evaluations per split and mask source, and per table (name -> rows as dicts, or objects with a
+    ``__dict__``) its rows, columns and filled cells. Notebook 07 prints it in the cell CI compares
+    (:mod:`sixdpose.reporting.nbcheck`)."""
+    lines = [f"{len(entries)} evaluations"]
+    for split in SPLITS:
+        for masks in MASKS:
+            keys = sorted(k[2] for k in entries if k[:2] == (split, masks))
+            if keys:
+                lines.append(f"  {split}/{masks}: {len(keys)} ({', '.join(keys)})")
+    for name, rows in tables.items():
+        rows = [r if isinstance(r, dict) else vars(r) for r in rows]
+        cols = sorted({c for r in rows for c in r})
+        filled = sum(1 for r in rows for v in r.values() if v is not None and v != "")
+        lines.append(f"{name}: {len(rows)} rows x {len(cols)} columns, {filled} cells filled")
+    return "\n".join(lines)
+
+
 def write_dataset_table(stats_csv: str | Path, tex_path, how: str) -> str:
     """The write-up's dataset table from notebook 02's statistics when they are here (:func:`dataset_table`);
     else the table already at ``tex_path`` is kept (written where the dataset was; its time is updated);
