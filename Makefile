@@ -18,7 +18,8 @@
 #                   pytest --nbval-lax: their `# NBVAL_CHECK_OUTPUT` cells must print what the reference holds
 #   make nbval-reference  record PROFILE's references from notebooks/executed/PROFILE/
 #   make benchmark  the benchmark scripts (print their figures, write them to results/)
-#   make results-readme  rewrite the README's generated tables from results/ (results-check: only compare)
+#   make results-readme  rewrite the generated tables of README.md and docs/*.md from results/ (results-check:
+#                   only compare)
 
 SHELL := /bin/bash
 PYTHON_SYS ?= python3
@@ -140,9 +141,10 @@ BENCHMARKS := generation segmentation registration colour_robustness
 benchmark: setup
 	@for b in $(BENCHMARKS); do echo "== benchmarks/$$b.py"; $(PY) benchmarks/$$b.py || exit 1; done
 
-# README blocks between <!-- results:NAME --> markers are generated from results/*.json (sixdpose.reporting.readme)
+# blocks between <!-- results:NAME --> markers in README.md and docs/*.md are generated from results/*.json
+# (sixdpose.reporting.readme)
 results-readme: setup
-	$(PY) -m sixdpose.reporting.readme --readme README.md --results results
+	$(PY) -m sixdpose.reporting.readme --readme README.md $(wildcard docs/*.md) --results results
 
 results-check: setup
-	$(PY) -m sixdpose.reporting.readme --readme README.md --results results --check
+	$(PY) -m sixdpose.reporting.readme --readme README.md $(wildcard docs/*.md) --results results --check
