@@ -326,6 +326,8 @@ FIG_OUT := $(addprefix $(FIG)/,accuracy_threshold.png table1.csv table2.csv tabl
 .PRECIOUS: $(TEX_OUT) $(FIG_OUT)
 $(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT) &: notebooks/07_evaluation.ipynb $(WRITEUP_RESULTS) $(WRITEUP_NB02) \
 	| $(VENV_OK)
+	$(if $(RECOMPUTE)$(WRITEUP_RESULTS),,@echo "make tables: $(RES) holds no result file; make reproduce PROFILE=$(PROFILE)" \
+	  "(or make tables PROFILE=$(PROFILE) RECOMPUTE=yes) computes them" >&2; exit 2)
 	$(call papermill,$<,-p PROFILE $(PROFILE) -p RESULTS ../$(RES) -p TEX ../$(GEN) -p TRAIN_DATA ../$(TRAIN_DIR) $(NB_FIG))
 
 # notebook 09: the synthetic-to-real networks of the YCBV branch (or, without it, the smoke network and refiner of data/ycbv_$(PROFILE))

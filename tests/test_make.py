@@ -179,6 +179,17 @@ def test_the_write_up_runs_no_stage(goal, flags):
     assert p.returncode == 0 and _STAGE.search(p.stdout), p.stderr
 
 
+def test_the_write_up_without_results_is_one_line():
+    """A profile without result files here (paper on a fresh clone): `make tables` says what computes them
+    and writes nothing."""
+    if list((REPO / "results" / "paper").glob("*.json")):
+        pytest.skip("results/paper holds results in this checkout")
+    p = _dry("tables", "PROFILE=paper", "-o", ".venv/.synced", "-o", ".venv/.apt")
+    assert p.returncode == 2
+    assert "results/paper holds no result file; make reproduce PROFILE=paper" in p.stderr
+    assert not (REPO / "paper" / "generated" / "paper").exists()
+
+
 def _copy_checkout(dest: Path) -> None:
     """The checkout's files (tracked and untracked, not ignored) in ``dest``, committed there, with this
     checkout's .venv linked in (ignored)."""
