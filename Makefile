@@ -8,10 +8,18 @@
 #                   files keyed by their inputs, so an interrupted run resumes; `make -n reproduce` prints the plan
 #   make ycbv       PROFILE=cpu|paper: only the synthetic-to-real branch (networks trained on generated
 #                   YCB-Video data, scored on YCBV_REAL's real frames)
-#   make fig2       Fig. 2 of PROFILE alone (figures/PROFILE/fig2_lmo_vs_ours.png: LM-O frames beside the training data's)
-#   make paper      the write-up PDF of PROFILE (paper/build/PROFILE/paper.pdf, copied to paper/paper.pdf)
+#   make tables     the write-up's tables, macros and charts of PROFILE from the result files that are here
+#                   (paper/generated/PROFILE, figures/PROFILE); runs no stage (RECOMPUTE=yes: the graph first)
+#   make paper      the same, then the write-up PDF when LaTeX is installed (paper/build/PROFILE/paper.pdf, copied
+#                   to paper/paper.pdf); `make paper PROFILE=cpu` builds it from the committed results/cpu
+#   make fig2       Fig. 2 of PROFILE alone (figures/PROFILE/fig2_lmo_vs_ours.png: LM-O frames beside the training
+#                   data's), from the training data that is here (RECOMPUTE=yes generates it)
+#   make nbval      the executed notebooks with a reference (notebooks/reference/PROFILE/) run again under
+#                   pytest --nbval-lax: their `# NBVAL_CHECK_OUTPUT` cells must print what the reference holds
+#   make nbval-reference  record PROFILE's references from notebooks/executed/PROFILE/
 #   make benchmark  the benchmark scripts (print their figures, write them to results/)
-#   make results-readme  rewrite the README's generated tables from results/ (results-check: only compare)
+#   make results-readme  rewrite the generated tables of README.md and docs/*.md from results/ (results-check:
+#                   only compare)
 #   make lab        JupyterLab on notebooks/ (the NN_*.py sources open as notebooks); LAB_ARGS="--port 8890 ..."
 
 SHELL := /bin/bash
@@ -41,8 +49,7 @@ include mk/profiles.mk
 include mk/reproduce.mk
 
 .PHONY: setup apt venv lint test test-fast notebooks-sync demo smoke reproduce evaluations ycbv paper tables fig2 benchmark \
-	results-readme \
-	results-check lab
+	results-readme results-check nbval nbval-reference lab
 .DELETE_ON_ERROR:
 
 setup: apt venv
@@ -71,10 +78,13 @@ $(VENV)/.synced: pyproject.toml uv.lock
 	@touch $@
 
 # CI: the tests, then the smoke graph (every notebook executed by papermill on the smoke profile, on
-# top of the smoke graph's datasets, runs and results)
+# top of the smoke graph's datasets, runs and results), the cpu write-up's tables from the committed
+# results (notebook 07, no stage), then nbval on the executed notebooks that have a reference
 test: setup lint
 	$(PY) -m pytest -p no:dash -q tests
 	$(MAKE) --no-print-directory smoke
+	$(MAKE) --no-print-directory tables PROFILE=cpu
+	$(MAKE) --no-print-directory nbval
 
 # ruff (rules in pyproject.toml) must be clean; mypy's error count may not grow past tools/mypy_baseline.txt
 lint: setup
@@ -120,21 +130,32 @@ $(error make ycbv needs PROFILE=cpu or PROFILE=paper (PROFILE=$(PROFILE) has no 
 endif
 endif
 
-# the tables and figures of notebook 07 (Tables I-III, per object, Fig. 7, accuracy vs threshold)
-tables: $(TEX_OUT) $(FIG_OUT)
+# the tables, macros and figures of notebook 07 (Tables I-III, per object, accuracy vs threshold, the charts;
+# Fig. 7 where its dataset is here): from the result files that are here unless RECOMPUTE=yes (mk/reproduce.mk)
+# (the executed notebook is a target too: on a fresh clone, where it is not, notebook 07 runs once)
+tables: $(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT)
 
 fig2: $(FIG2)
 
-paper: $(if $(HAVE_LATEX),$(PDF_DIR)/paper.pdf)
+paper: tables $(if $(HAVE_LATEX),$(PDF_DIR)/paper.pdf)
+
+# nbval (sixdpose.reporting.nbcheck): runs after the notebooks were executed (make test: the smoke graph and
+# `make tables PROFILE=cpu`); the notebooks it runs are written to build/nbval/
+nbval: setup
+	$(PY) -m sixdpose.reporting.nbcheck check --reference notebooks/reference --executed notebooks/executed --out build/nbval
+
+nbval-reference: setup
+	$(PY) -m sixdpose.reporting.nbcheck record --executed $(EXEC) --out notebooks/reference/$(PROFILE)
 
 BENCHMARKS := generation segmentation registration colour_robustness
 
 benchmark: setup
 	@for b in $(BENCHMARKS); do echo "== benchmarks/$$b.py"; $(PY) benchmarks/$$b.py || exit 1; done
 
-# README blocks between <!-- results:NAME --> markers are generated from results/*.json (sixdpose.reporting.readme)
+# blocks between <!-- results:NAME --> markers in README.md and docs/*.md are generated from results/*.json
+# (sixdpose.reporting.readme)
 results-readme: setup
-	$(PY) -m sixdpose.reporting.readme --readme README.md --results results
+	$(PY) -m sixdpose.reporting.readme --readme README.md $(wildcard docs/*.md) --results results
 
 results-check: setup
-	$(PY) -m sixdpose.reporting.readme --readme README.md --results results --check
+	$(PY) -m sixdpose.reporting.readme --readme README.md $(wildcard docs/*.md) --results results --check

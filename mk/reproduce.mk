@@ -20,6 +20,9 @@
 # trained network and result of record is a target here: the notebooks only read them (sixdpose.graph
 # names the target of a missing one).
 # LMO=/path/to/lmo (a full BOP LM-O with depth) adds the LM-O rows of Table I.
+# `make tables` and `make paper` (without RECOMPUTE=yes) are not this graph: they build the write-up from the
+# result files that are here (the committed results/cpu on a fresh clone) and run no stage; see "what the
+# write-up reads" below.
 
 SIXDPOSE := $(VENV)/bin/sixdpose
 VENV_OK := $(VENV)/.synced $(APT_STAMP)
@@ -253,11 +256,30 @@ $(foreach k,$(MASKS),$(foreach m,$(HYBRID),$(eval $(call lmo_rule,$(k),$(m)))))
 RESULTS += $(foreach k,$(MASKS),$(foreach m,$(HYBRID),$(RES)/lmo_$(k)_$(m).json))
 endif
 
+# ---- what the write-up reads: the graph's results, or the result files as they are -------------
+# `make reproduce` (and demo, smoke) recomputes: notebook 07 and the PDF wait for every result target of the
+# graph and for notebook 02 (Fig. 2, Fig. 3, the dataset statistics). Any other goal (`make tables`, `make
+# paper`, `make fig2`) reads the files that are here (the committed results/cpu on a fresh clone) and runs no
+# stage: they are named by their absolute paths (on_disk), which no rule of the graph makes, so make only
+# compares their times. RECOMPUTE=yes makes those goals recompute as reproduce does.
+RECOMPUTE ?= $(if $(filter reproduce demo smoke,$(MAKECMDGOALS)),yes)
+override RECOMPUTE := $(filter yes,$(RECOMPUTE))
+on_disk = $(abspath $(wildcard $(1)))
+ifeq ($(RECOMPUTE),yes)
+WRITEUP_RESULTS = $(RESULTS) $(YCBV_RESULTS)
+WRITEUP_NB02 = $(EXEC)/02_dataset_overview.ipynb
+WRITEUP_FIGS :=
+else
+WRITEUP_RESULTS = $(call on_disk,$(RES)/*.json)
+WRITEUP_NB02 = $(call on_disk,$(FIG)/dataset_statistics.csv)
+WRITEUP_FIGS = $(call on_disk,$(addprefix $(FIG)/,fig2_lmo_vs_ours.png fig3_random_images.png fig7.png))
+endif
+
 # ---- notebooks, executed on top of those files -----------------------------------------------
 # papermill writes the executed copy beside its target and moves it into place when every cell ran,
 # so a failed notebook leaves no target behind
 define papermill
-	@mkdir -p $(@D) $(FIG)
+	@mkdir -p $(EXEC) $(FIG)
 	$(PAPERMILL) $(1) $(EXEC)/.$(notdir $(1)).tmp.ipynb $(2) && mv $(EXEC)/.$(notdir $(1)).tmp.ipynb $(EXEC)/$(notdir $(1))
 endef
 NB_FIG := -p FIGURES ../$(FIG)
@@ -271,9 +293,12 @@ LMO_FRAMES ?= $(or $(LMO),../shared/data/lmo)
 $(EXEC)/02_dataset_overview.ipynb: notebooks/02_dataset_overview.ipynb $(TRAIN_DIR)/manifest.json | $(VENV_OK)
 	$(call papermill,$<,-p PROFILE $(P_TRAIN_GEN) -p DATA ../$(TRAIN_DIR) -p LMO $(abspath $(LMO_FRAMES)) $(NB_FIG))
 
-# Fig. 2 alone (`make fig2 PROFILE=demo`): the same figure without the rest of notebook 02
+# Fig. 2 alone (`make fig2 PROFILE=demo`): the same figure without the rest of notebook 02, from the training
+# data that is here (RECOMPUTE=yes generates it first where it is not)
 FIG2 := $(FIG)/fig2_lmo_vs_ours.png
-$(FIG2): $(TRAIN_DIR)/manifest.json | $(VENV_OK)
+$(FIG2): $(if $(RECOMPUTE),$(TRAIN_DIR)/manifest.json,$(call on_disk,$(TRAIN_DIR)/manifest.json)) | $(VENV_OK)
+	@test -f $(TRAIN_DIR)/manifest.json || { echo "make fig2: $(TRAIN_DIR) is not here;" \
+	  "make fig2 PROFILE=$(PROFILE) RECOMPUTE=yes generates it first" >&2; exit 2; }
 	$(PY) -m sixdpose.reporting.fig2 --lmo $(LMO_FRAMES) --ours $(TRAIN_DIR) --out $@
 
 $(EXEC)/03_train_segmentation.ipynb: notebooks/03_train_segmentation.ipynb $(RUNS)/seg/model.pt $(RUNS)/seg/pred_test/meta.json \
@@ -302,13 +327,20 @@ $(EXEC)/08_real_data.ipynb: notebooks/08_real_data.ipynb $(KINECT_RESULTS) $(KIN
 	$(call papermill,$<,-p PROFILE $(PROFILE) -p WORKERS $(WORKERS) -p RESULTS ../$(RES) -p SENSOR_METHODS "$(KINECT_METHODS)" \
 	  $(NB_FIG))
 
-# notebook 07 reads results/P/ only (and, for Fig. 7, the results CSV and dataset a result names)
+# notebook 07 reads results/P/ only (and, for Fig. 7, the results CSV and dataset a result names; the dataset
+# statistics of notebook 02). Besides TEX_OUT and FIG_OUT it writes the charts of the tables
+# (sixdpose.reporting.charts: table3.png, table2_fps.png, per_object_<split>_<masks>.png, real_frames.png,
+# real_threshold.png, ablation.png, where there are results) and fig7.png where its inputs are here.
 TEX_OUT := $(addprefix $(GEN)/,macros.tex table1.tex table2.tex table2_e2e.tex table3.tex claims.tex table_dataset.tex table_real.tex table_ablation.tex \
 	$(foreach s,$(SPLITS),$(foreach k,$(MASKS),per_object_$(s)_$(k).tex)))
-FIG_OUT := $(addprefix $(FIG)/,fig7.png accuracy_threshold.png table1.csv table2.csv table2_e2e.csv table3.csv claims.csv)
-# (and the beyond-the-paper tables: the synthetic-to-real results and the ablation result, in RESULTS)
-$(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT) &: notebooks/07_evaluation.ipynb $(RESULTS) $(YCBV_RESULTS) \
-	$(EXEC)/02_dataset_overview.ipynb | $(VENV_OK)
+FIG_OUT := $(addprefix $(FIG)/,accuracy_threshold.png table1.csv table2.csv table2_e2e.csv table3.csv claims.csv)
+# precious: a failed run of notebook 07 (which writes each file atomically) leaves the tables as they were
+# (.DELETE_ON_ERROR would delete them, the committed ones of cpu too)
+.PRECIOUS: $(TEX_OUT) $(FIG_OUT)
+$(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT) &: notebooks/07_evaluation.ipynb $(WRITEUP_RESULTS) $(WRITEUP_NB02) \
+	| $(VENV_OK)
+	$(if $(RECOMPUTE)$(WRITEUP_RESULTS),,@echo "make tables: $(RES) holds no result file; make reproduce PROFILE=$(PROFILE)" \
+	  "(or make tables PROFILE=$(PROFILE) RECOMPUTE=yes) computes them" >&2; exit 2)
 	$(call papermill,$<,-p PROFILE $(PROFILE) -p RESULTS ../$(RES) -p TEX ../$(GEN) -p TRAIN_DATA ../$(TRAIN_DIR) $(NB_FIG))
 
 # notebook 09: the synthetic-to-real networks of the YCBV branch (or, without it, the smoke network and refiner of data/ycbv_$(PROFILE))
@@ -326,10 +358,13 @@ PAPER_SRC := $(wildcard paper/*.tex paper/*.bib)
 LATEXMK := latexmk
 # LaTeX is there, or WITH_LATEX=1 installs it before any target runs (order-only $(APT_STAMP))
 HAVE_LATEX := $(if $(WITH_LATEX),yes,$(shell command -v $(LATEXMK) >/dev/null 2>&1 && command -v pdflatex >/dev/null 2>&1 && echo yes))
-$(PDF_DIR)/paper.pdf paper/paper.pdf &: $(PAPER_SRC) $(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT) $(EXEC)/02_dataset_overview.ipynb \
-	| $(VENV_OK)
+# a figure of the write-up that is not in figures/P/ (drawn from a dataset that is not here) is a placeholder
+# in the PDF saying what makes it (sixdpose.reporting.writeup, in paper/build/P/missing/)
+$(PDF_DIR)/paper.pdf paper/paper.pdf &: $(PAPER_SRC) $(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT) $(WRITEUP_NB02) \
+	$(WRITEUP_FIGS) | $(VENV_OK)
 	@mkdir -p $(PDF_DIR)
-	cd paper && TEXINPUTS=generated/$(PROFILE)//:../$(FIG)//: $(LATEXMK) -pdf -interaction=nonstopmode -halt-on-error \
+	$(PY) -m sixdpose.reporting.writeup --profile $(PROFILE) --figures $(FIG) --out $(PDF_DIR)/missing
+	cd paper && TEXINPUTS=generated/$(PROFILE)//:../$(FIG)//:build/$(PROFILE)/missing//: $(LATEXMK) -pdf -interaction=nonstopmode -halt-on-error \
 	  -quiet -outdir=build/$(PROFILE) paper.tex >build/$(PROFILE)/latexmk.log 2>&1 \
 	  || { tail -40 build/$(PROFILE)/latexmk.log; exit 1; }
 	@touch $(PDF_DIR)/paper.pdf  # latexmk leaves the PDF alone when its inputs' contents did not change

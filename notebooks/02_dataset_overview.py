@@ -101,3 +101,14 @@ plt.show()
 assert st["targets_per_scene"].min() >= 5 and st["targets_per_scene"].max() <= 20 or PROFILE == "smoke"
 assert st["max_instances_of_one_object"] <= 4
 assert len(st["instances_per_object"]) <= 18
+
+# %% [markdown]
+# What CI compares (`make nbval`, `notebooks/reference/<profile>/`): counts of the dataset's ground truth, which
+# a generation with the same profile and seed reproduces exactly.
+
+# %%
+# NBVAL_CHECK_OUTPUT
+tps = st["targets_per_scene"]
+print(f"{len(ds)} images, {int(st['instances_per_image'].sum())} visible target instances of "
+      f"{len(st['instances_per_object'])} objects, at most {st['max_instances_of_one_object']} of one object "
+      f"in a scene, {int(tps.min(initial=99))}-{int(tps.max(initial=0))} targets per scene")

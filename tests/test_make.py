@@ -181,3 +181,87 @@ def test_the_duplicate_check_finds_a_duplicate():
             ".venv/bin/sixdpose train-pose --data data/ycbv --out runs/p/c --no-progress --profile paper --set x=1\n")
     found = trainings(plan)
     assert sorted(found.values(), key=len) == [["runs/p/c"], ["runs/p/a", "runs/p/b"]]
+
+
+# --------------------------------------------------------------------------------------------
+# the write-up from the result files that are here (make tables / make paper): no stage command
+# --------------------------------------------------------------------------------------------
+_STAGE = re.compile(r"\bsixdpose (generate|train-seg|train-pose|train-refiner|segment|register|predict-pose|evaluate|"
+                    r"pose-ablation)\b")
+
+
+def _dry(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["make", "--no-print-directory", *args], cwd=REPO, capture_output=True, text=True,
+                          timeout=120)
+
+
+@pytest.mark.parametrize("goal", ["paper", "tables", "fig2"])
+@pytest.mark.parametrize("flags", ["-n", "-nB"])
+def test_the_write_up_runs_no_stage(goal, flags):
+    """`make tables` / `make paper` (and `make fig2`) on the committed results/cpu list no stage command,
+    even with every target out of date (-B): the results are inputs, not targets."""
+    p = _dry(flags, goal, "PROFILE=cpu", "WITH_LATEX=1")
+    assert p.returncode == 0, p.stderr
+    assert _STAGE.findall(p.stdout) == [], f"make {flags} {goal} PROFILE=cpu runs stages:\n{p.stdout}"
+    if goal != "fig2" and flags == "-nB":
+        assert "07_evaluation.ipynb" in p.stdout  # notebook 07 builds the tables from results/cpu
+        assert ("latexmk -pdf" in p.stdout) == (goal == "paper")
+    # RECOMPUTE=yes is the graph again: the write-up waits for every stage
+    p = _dry("-nB", goal, "PROFILE=cpu", "RECOMPUTE=yes")
+    assert p.returncode == 0 and _STAGE.search(p.stdout), p.stderr
+
+
+def test_the_write_up_without_results_is_one_line():
+    """A profile without result files here (paper on a fresh clone): `make tables` says what computes them
+    and writes nothing."""
+    if list((REPO / "results" / "paper").glob("*.json")):
+        pytest.skip("results/paper holds results in this checkout")
+    p = _dry("tables", "PROFILE=paper", "-o", ".venv/.synced", "-o", ".venv/.apt")
+    assert p.returncode == 2
+    assert "results/paper holds no result file; make reproduce PROFILE=paper" in p.stderr
+    assert not (REPO / "paper" / "generated" / "paper").exists()
+
+
+def _copy_checkout(dest: Path) -> None:
+    """The checkout's files (tracked and untracked, not ignored) in ``dest``, committed there, with this
+    checkout's .venv linked in (ignored)."""
+    files = subprocess.run(["git", "ls-files", "-co", "--exclude-standard", "-z"], cwd=REPO, capture_output=True,
+                           check=True).stdout.decode().split("\0")
+    for f in filter(None, files):
+        src = REPO / f
+        if src.is_file():
+            (dest / f).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(src, dest / f)
+    (dest / ".venv").symlink_to(REPO / ".venv")
+    git = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-c", "commit.gpgsign=false"]
+    subprocess.run([*git, "init", "-q"], cwd=dest, check=True)
+    (dest / ".git" / "info" / "exclude").write_text(".venv\n")
+    subprocess.run([*git, "add", "-A"], cwd=dest, check=True)
+    subprocess.run([*git, "commit", "-qm", "copy"], cwd=dest, check=True)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (REPO / ".venv" / "bin" / "python").exists(), reason="no .venv (make setup)")
+def test_make_tables_on_the_committed_results_writes_no_result(tmp_path):
+    """`make tables PROFILE=cpu` in a copy of the checkout: notebook 07 runs on the committed results/cpu
+    (a few seconds), results/ is untouched, and the committed tables, macros and figures are what it
+    writes (a change of the reporting code must come with them rebuilt: `make tables PROFILE=cpu`)."""
+    _copy_checkout(tmp_path)
+    for f in (tmp_path / "results" / "cpu").glob("*.json"):
+        f.touch()  # results newer than the tables (a fresh clone's order of times is arbitrary): notebook 07 runs
+    # -o: the linked .venv is this checkout's, set up already (its stamps are not remade)
+    p = subprocess.run(["make", "--no-print-directory", "tables", "PROFILE=cpu", "-o", ".venv/.synced", "-o",
+                        ".venv/.apt"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+    assert _STAGE.findall(p.stdout) == []
+    assert (tmp_path / "notebooks" / "executed" / "cpu" / "07_evaluation.ipynb").is_file()
+    status = subprocess.run(["git", "status", "--porcelain", "--", "results"], cwd=tmp_path, capture_output=True,
+                            text=True, check=True).stdout
+    assert status == "", f"make tables wrote into results/:\n{status}"
+    changed = subprocess.run(["git", "status", "--porcelain"], cwd=tmp_path, capture_output=True, text=True,
+                             check=True).stdout
+    assert changed == "", (f"make tables PROFILE=cpu changed committed files (rebuild them with it and commit):\n"
+                           f"{changed}")
+    again = subprocess.run(["make", "-q", "tables", "PROFILE=cpu", "-o", ".venv/.synced", "-o", ".venv/.apt"],
+                           cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert again.returncode == 0  # up to date: a second run does nothing

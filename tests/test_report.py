@@ -345,3 +345,58 @@ def test_table2_end_to_end_from_the_benchmark_result(tmp_path):
     write_result(report.TABLE2_BENCH, [{"method": "nonsense", "frames": 1}], results_dir=d)
     with pytest.raises(report.ReportError, match="table2_fps.json: method 'nonsense'"):
         report.table2_e2e(d)
+
+
+# --------------------------------------------------------------------------------------------
+# the write-up where the datasets are not here (make tables on the committed results), the charts
+# --------------------------------------------------------------------------------------------
+def test_dataset_values_and_table_kept_where_the_datasets_are_not_here(results, tmp_path):
+    e = report.load_entries(results)
+    macros = tmp_path / "macros.tex"
+    report.write_macros(e, "cpu", macros, extra={"images@train": "1,200 images", "seed@test": "300",
+                                                 "images@single": "a_b"})
+    values = report.dataset_values(e, tmp_path, tmp_path / "no_data")
+    assert values["images@train"] == "n/a" and values["seed@test"] == "n/a"
+    kept_values, kept = report.keep_known(values, macros)
+    assert kept_values["images@train"] == "1,200 images" and kept_values["seed@test"] == "300"
+    # a value LaTeX escaping would change is not carried over (it would be escaped twice)
+    assert "images@single" not in kept and kept_values["images@single"] == "n/a"
+    assert report.keep_known(values, tmp_path / "none.tex") == (values, [])
+    tex = tmp_path / "table_dataset.tex"
+    line = report.write_dataset_table(tmp_path / "stats.csv", tex, "make nb02")
+    assert "not computed" in line and "not computed: make nb02" in tex.read_text()
+    (tmp_path / "stats.csv").write_text("quantity,paper,this dataset\nimages,\"25,000\",6\n")
+    assert "from" in report.write_dataset_table(tmp_path / "stats.csv", tex, "make nb02")
+    text = tex.read_text()
+    assert "25,000" in text
+    (tmp_path / "stats.csv").unlink()
+    assert "kept" in report.write_dataset_table(tmp_path / "stats.csv", tex, "make nb02") and tex.read_text() == text
+
+
+def test_shape_summary_counts_only(results):
+    e = report.load_entries(results)
+    text = report.shape_summary(e, {"Table III": report.table3(e), "empty": []})
+    assert text.splitlines()[0] == "9 evaluations"
+    assert "  single/pred: 3 (learned_it2, ransac_icp, super4pcs)" in text
+    assert re.search(r"^Table III: \d+ rows x 6 columns, \d+ cells filled$", text, re.M)
+    assert "empty: 0 rows x 0 columns, 0 cells filled" in text
+    assert not re.search(r"\d+\.\d", text)  # no figure, only counts
+
+
+def test_charts_from_results_alone(results, tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from sixdpose.reporting import charts
+
+    e = report.load_entries(results)
+    figs = tmp_path / "figs"
+    written, skipped = charts.write_charts(e, results, "cpu", figs)
+    assert {"table3.png", "table2_fps.png", "per_object_test_gt.png", "per_object_single_pred.png"} <= set(written)
+    assert sorted(p.name for p in figs.iterdir()) == sorted(written)
+    assert "real_frames.png" in skipped and "ablation.png" in written  # no real-frame result; the ablation ran
+    first = (figs / "table3.png").read_bytes()
+    charts.write_charts(e, results, "cpu", figs)
+    assert (figs / "table3.png").read_bytes() == first  # the same results, the same bytes
+    assert b"Matplotlib" not in first
+    assert charts.plot_table3([]) is None and charts.plot_per_object([]) is None and charts.plot_real([]) is None

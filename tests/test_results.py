@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from sixdpose.artifacts.results import ResultError, read_result, write_result
-from sixdpose.reporting.readme import BLOCKS, render_block, stale_blocks
+from sixdpose.reporting.readme import BLOCKS, default_pages, render_block, stale_blocks
 from sixdpose.reporting.readme import main as readme_main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -23,11 +23,20 @@ REPO = Path(__file__).resolve().parents[1]
 # --------------------------------------------------------------------------------------------
 # the README's generated tables are what results/ generates
 # --------------------------------------------------------------------------------------------
-def test_readme_blocks_match_results():
-    text = (REPO / "README.md").read_text()
-    assert "<!-- results:" in text, "README.md has no generated result blocks"
-    stale = stale_blocks(REPO / "README.md", REPO / "results")
-    assert stale == [], f"README blocks {stale} differ from results/: run `make results-readme`"
+@pytest.mark.parametrize("page", [p.relative_to(REPO) for p in default_pages(REPO)], ids=str)
+def test_readme_blocks_match_results(page):
+    """The generated blocks of the README and of the pages of docs/ are what results/ generates."""
+    stale = stale_blocks(REPO / page, REPO / "results")
+    assert stale == [], f"{page}: blocks {stale} differ from results/: run `make results-readme`"
+
+
+def test_the_readme_and_docs_hold_generated_blocks():
+    pages = default_pages(REPO)
+    assert REPO / "README.md" in pages and len(pages) > 5
+    assert "<!-- results:" in (REPO / "README.md").read_text(), "README.md has no generated result blocks"
+    # every curated block is shown somewhere
+    text = "".join(p.read_text() for p in pages)
+    assert all(f"<!-- results:{name} -->" in text for name in BLOCKS)
 
 
 def test_every_result_file_reads():

@@ -38,7 +38,7 @@
     RANSAC + ICP sweep (ADD(-S) accuracy on the 214 validation instances; one instance = 0.47 %;
     repeated runs of the same variant differed by one instance; instances/s with two sweeps sharing
     the two cores, so slower than the quiet one-core benchmark, ``benchmarks/registration.py``, whose
-    figures for the default are in the README and ``results/registration_val.json``):
+    figures for the default go to ``results/registration_val.json``, see ``docs/registration.md``):
 
     * default: 93.9-94.4 % at 8.2 inst/s -> kept
     * RANSAC 20k / 30k / 100k iterations: 92.1/92.5/94.4 % at 10.7/10.0/6.3 inst/s -> 50k: 100k is no better and slower

@@ -1,6 +1,6 @@
 """The README's result tables, generated from ``results/`` (:mod:`sixdpose.artifacts.results`).
 
-A generated block in ``README.md`` sits between two markers::
+A generated block in ``README.md`` (or a page of ``docs/``) sits between two markers::
 
     <!-- results:NAME -->
     ...                       (everything here is rewritten)
@@ -13,12 +13,12 @@ ends with a line naming its result files and their commit, date and hardware.
 
 Usage (from the checkout's root; ``make results-readme`` runs the first form)::
 
-    python -m sixdpose.reporting.readme            # rewrite the blocks of README.md from results/
+    python -m sixdpose.reporting.readme            # rewrite the blocks of README.md and docs/*.md from results/
     python -m sixdpose.reporting.readme --check    # exit status 1 (and say which) if a block differs
-    python -m sixdpose.reporting.readme --readme README.md --results results
+    python -m sixdpose.reporting.readme --readme README.md docs/pose.md --results results
 
 A missing or corrupt result file, an unknown marker or an unterminated block is one line on stderr and
-exit status 2; the README is then left as it was.
+exit status 2; that file is then left as it was.
 """
 
 from __future__ import annotations
@@ -352,38 +352,50 @@ def stale_blocks(readme: str | Path, results_dir: str | Path) -> list[str]:
     return [n for n in old_blocks if old_blocks[n] != new_blocks.get(n)]
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Rewrite (or with ``--check`` compare) the README's generated blocks; returns the exit status."""
-    ap = argparse.ArgumentParser(prog="python -m sixdpose.reporting.readme", description=__doc__.splitlines()[0])
-    ap.add_argument("--readme", default="README.md", help="the README to rewrite (default: README.md)")
-    ap.add_argument("--results", default="results", help="the results directory (default: results)")
-    ap.add_argument("--check", action="store_true", help="change nothing; exit status 1 if a block differs")
-    args = ap.parse_args(argv)
-    readme = Path(args.readme)
+def default_pages(root: str | Path = ".") -> list[Path]:
+    """``README.md`` and every ``docs/*.md`` under ``root`` (the files ``make results-readme`` rewrites)."""
+    root = Path(root)
+    return [root / "README.md", *sorted((root / "docs").glob("*.md"))]
+
+
+def _one(readme: Path, results: str, check: bool) -> int:
+    """Rewrite (``check``: compare) the blocks of one file; returns its exit status."""
     try:
         text = readme.read_text(encoding="utf-8")
-        new = render_readme(text, args.results, str(readme))
+        new = render_readme(text, results, str(readme))
     except (SixdposeError, OSError) as e:
         print(f"readme: error: {e}", file=sys.stderr)
         return 2
     names = [n for n, _, _ in blocks(text, str(readme))]
-    if args.check:
+    if check:
         if new == text:
-            print(f"{readme}: {len(names)} generated block(s) up to date with {args.results}/")
+            print(f"{readme}: {len(names)} generated block(s) up to date with {results}/")
             return 0
-        stale = stale_blocks(readme, args.results)
-        print(f"{readme}: block(s) {', '.join(stale)} differ from {args.results}/; run `make results-readme`",
+        stale = stale_blocks(readme, results)
+        print(f"{readme}: block(s) {', '.join(stale)} differ from {results}/; run `make results-readme`",
               file=sys.stderr)
         sys.stderr.writelines(difflib.unified_diff(text.splitlines(True), new.splitlines(True), str(readme),
                                                    f"{readme} (generated)", n=1))
         return 1
     if new != text:
         atomic_write_text(readme, new)
-        print(f"{readme}: rewrote {len(names)} block(s) from {args.results}/")
+        print(f"{readme}: rewrote {len(names)} block(s) from {results}/")
     else:
         print(f"{readme}: {len(names)} generated block(s) already up to date")
     return 0
 
+
+def main(argv: list[str] | None = None) -> int:
+    """Rewrite (or with ``--check`` compare) the generated blocks of each file; returns the exit status (the
+    worst of the files': 2 an error, 1 a stale block)."""
+    ap = argparse.ArgumentParser(prog="python -m sixdpose.reporting.readme", description=__doc__.splitlines()[0])
+    ap.add_argument("--readme", nargs="+", default=None,
+                    help="the markdown files to rewrite (default: README.md and docs/*.md)")
+    ap.add_argument("--results", default="results", help="the results directory (default: results)")
+    ap.add_argument("--check", action="store_true", help="change nothing; exit status 1 if a block differs")
+    args = ap.parse_args(argv)
+    pages = [Path(p) for p in args.readme] if args.readme else default_pages()
+    return max(_one(p, args.results, args.check) for p in pages)
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -432,6 +432,37 @@ def dataset_values(entries: dict, root: str | Path = ".", train_data: str | Path
     return out
 
 
+_VAL_LINE = re.compile(r"^\\expandafter\\def\\csname sdp@val@(?P<name>[^\\]+)\\endcsname\{(?P<value>.*)\}$")
+
+
+def previous_values(macros_path: str | Path) -> dict[str, str]:
+    """The ``\\val`` values of an existing macro file (name -> LaTeX text; empty when there is none)."""
+    try:
+        text = Path(macros_path).read_text(encoding="utf-8")
+    except OSError:
+        return {}
+    return {m.group("name"): m.group("value") for m in map(_VAL_LINE.match, text.splitlines()) if m}
+
+
+def keep_known(values: dict[str, str], macros_path: str | Path) -> tuple[dict[str, str], list[str]]:
+    """``values`` (e.g. :func:`dataset_values`) with each ``n/a`` replaced by the value the existing macro
+    file ``macros_path`` holds under the same name: the sizes of datasets that are not here (a fresh clone
+    builds the write-up from the committed results) stay what the build that had them wrote. Only plain
+    values are kept (text that LaTeX escaping leaves as it is).
+
+    Returns:
+        the values, and the names whose value was kept.
+    """
+    old = previous_values(macros_path)
+    out, kept = dict(values), []
+    for k, v in values.items():
+        prev = old.get(k)
+        if v == "n/a" and prev not in (None, "n/a") and tex_escape(prev) == prev:
+            out[k] = prev
+            kept.append(k)
+    return out, kept
+
+
 # --------------------------------------------------------------------------------------------
 # the macro file of the write-up: every number of its prose
 # --------------------------------------------------------------------------------------------
@@ -824,6 +855,48 @@ def beyond_findings(results_dir: str | Path, profile: str, name: str = "ycbv") -
     else:
         out["ablation"] = "This profile has not run the ablation, so the table is empty."
     return {f"finding@{k}": v for k, v in out.items()}
+
+
+def shape_summary(entries: dict, tables: dict) -> str:
+    """Counts and shapes only (deterministic for given result files; no figure, time or path): the
+    evaluations per split and mask source, and per table (name -> rows as dicts, or objects with a
+    ``__dict__``) its rows, columns and filled cells. Notebook 07 prints it in the cell CI compares
+    (:mod:`sixdpose.reporting.nbcheck`)."""
+    lines = [f"{len(entries)} evaluations"]
+    for split in SPLITS:
+        for masks in MASKS:
+            keys = sorted(k[2] for k in entries if k[:2] == (split, masks))
+            if keys:
+                lines.append(f"  {split}/{masks}: {len(keys)} ({', '.join(keys)})")
+    for name, rows in tables.items():
+        rows = [r if isinstance(r, dict) else vars(r) for r in rows]
+        cols = sorted({c for r in rows for c in r})
+        filled = sum(1 for r in rows for v in r.values() if v is not None and v != "")
+        lines.append(f"{name}: {len(rows)} rows x {len(cols)} columns, {filled} cells filled")
+    return "\n".join(lines)
+
+
+def write_dataset_table(stats_csv: str | Path, tex_path, how: str) -> str:
+    """The write-up's dataset table from notebook 02's statistics when they are here (:func:`dataset_table`);
+    else the table already at ``tex_path`` is kept (written where the dataset was; its time is updated);
+    else a one-row table says what makes it (``how``, e.g. the make target of notebook 02).
+
+    Returns:
+        one line saying which of the three happened.
+    """
+    stats_csv, tex_path = Path(stats_csv), Path(tex_path)
+    if stats_csv.is_file():
+        dataset_table(stats_csv, tex_path)
+        return f"{tex_path.name}: from {stats_csv}"
+    if tex_path.is_file():
+        tex_path.touch()  # made by this build (for make: newer than the results it was built beside)
+        return f"{tex_path.name}: kept as it is ({stats_csv} is not here; {how} writes it)"
+    write_table([{"quantity": f"not computed: {how}", "paper": "", "this dataset": ""}],
+                ["quantity", "paper", "this dataset"], None, tex_path,
+                headers=["Quantity", "Paper (section III)", "This dataset"],
+                align="p{0.34\\linewidth}p{0.28\\linewidth}p{0.28\\linewidth}",
+                comment=f"{stats_csv.name} (notebook 02) was not here")
+    return f"{tex_path.name}: not computed ({stats_csv} is not here; {how} writes it)"
 
 
 def dataset_table(stats_csv: str | Path, tex_path) -> Path:
