@@ -1,0 +1,82 @@
+"""A learned pose run on the real YCB-Video sample, leave-one-scene-out: alone, + ICP, + verification.
+
+For each pose run given (``--pose LABEL=RUN_DIR``, repeatable) and each variant (alone, ``--icp``,
+``--verify``, ``--icp --verify``) this runs, unless its CSV is already there (so an interrupted
+collection resumes)::
+
+    sixdpose predict-pose --pose RUN --data ../shared/data/ycbv_sample --split train_real --masks gt \\
+        [--icp] [--verify] --out <work>/<label>_<variant>.csv
+
+then scores the CSV on each scene of the sample alone and on both (``evaluate --scenes``; GT masks,
+``--min-px 0``, BOP symmetric ids 1,13,14,16,18-21) and writes ``results/learned_ycbv_sample.json``:
+one row per run and variant, ``correct/GT (accuracy)`` for scene 000000, scene 000001 and both. The
+networks are trained only on generated data; scene 000000 is the sample's tuning scene and 000001 the
+held-out one (leave-one-scene-out: choose on one column, report the other).
+
+    python benchmarks/learned_ycbv_sample.py --pose dense=runs/pose_ycbv_dense [--work runs/learned_ycbv_sample]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from sixdpose.artifacts.results import write_result
+
+#: (variant label, predict-pose switches)
+VARIANTS = [("alone", []), ("+ ICP", ["--icp"]), ("+ verify", ["--verify"]), ("+ ICP + verify", ["--icp", "--verify"])]
+SYMMETRIC_IDS = "1,13,14,16,18,19,20,21"
+
+
+def _cli(*args: str) -> None:
+    """Run one ``sixdpose`` command of this interpreter's environment; exits with its status on failure."""
+    cmd = [str(Path(sys.executable).with_name("sixdpose")), *args]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode:
+        sys.exit(f"learned_ycbv_sample: {' '.join(cmd)} failed ({proc.returncode}): "
+                 f"{(proc.stderr.strip().splitlines() or ['?'])[-1]}")
+
+
+def main() -> None:
+    """Predict, evaluate per scene and write ``results/learned_ycbv_sample.json``; prints the rows."""
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--pose", action="append", required=True, help="LABEL=RUN_DIR of train-pose (repeatable)")
+    ap.add_argument("--data", default="../shared/data/ycbv_sample")
+    ap.add_argument("--work", default="runs/learned_ycbv_sample", help="results CSVs and evaluations")
+    ap.add_argument("--results-dir", default="results")
+    a = ap.parse_args()
+    work = Path(a.work)
+    work.mkdir(parents=True, exist_ok=True)
+    rows, inputs = [], []
+    for spec in a.pose:
+        label, _, run = spec.partition("=")
+        if not run or not Path(run, "model.pt").is_file():
+            sys.exit(f"learned_ycbv_sample: --pose {spec}: expected LABEL=RUN_DIR with a model.pt")
+        for variant, switches in VARIANTS:
+            stem = f"{label}_{'_'.join(s.strip('-') for s in switches) or 'alone'}"
+            out = work / f"{stem}.csv"
+            if not out.is_file():
+                _cli("predict-pose", "--pose", run, "--data", a.data, "--split", "train_real", "--masks", "gt",
+                     "--no-progress", "--out", str(out), *switches)
+            row = {"run": label, "pose run": run, "variant": variant}
+            for part, col in (("0", "scene 000000 (tuning)"), ("1", "scene 000001 (held out)"), ("all", "both")):
+                ev = work / f"{stem}_eval_{part}"
+                _cli("evaluate", "--data", a.data, "--split", "train_real", "--symmetric-ids", SYMMETRIC_IDS,
+                     "--min-px", "0", "--all-images", "--no-bop", "--no-progress", "--results", str(out),
+                     "--out", str(ev), *([] if part == "all" else ["--scenes", part]))
+                s = json.loads((ev / "summary.json").read_text())
+                row[col] = f"{s['n_correct']}/{s['n_gt']} ({s['accuracy']:.2f} %)"
+            rows.append(row)
+            inputs.append(str(out))
+            print(row, flush=True)
+    write_result("learned_ycbv_sample", rows, results_dir=a.results_dir, inputs=inputs,
+                 description="predict-pose [--icp] [--verify] on ycbv_sample train_real (networks trained on generated "
+                             "data only), GT masks, min-px 0, BOP symmetric ids 1,13,14,16,18-21: correct/GT per scene",
+                 notes="scene 000000 is the tuning scene, 000001 the held-out one (leave-one-scene-out)")
+
+
+if __name__ == "__main__":
+    main()
