@@ -28,6 +28,17 @@ def _env() -> dict:
     return env
 
 
+def _sigint_ignored(pid: int) -> bool:
+    """Whether process ``pid`` ignores SIGINT (bit 2 of the SigIgn mask of /proc/PID/status; False once gone)."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("SigIgn:"):
+                return bool(int(line.split()[1], 16) & (1 << (signal.SIGINT - 1)))
+    except OSError:
+        pass
+    return False
+
+
 def _without_time(path: Path) -> list[str]:
     """The results CSV's lines without the last column (``time``)."""
     return [line.rsplit(",", 1)[0] for line in path.read_text().splitlines()]
@@ -166,14 +177,23 @@ def test_register_ctrl_c_is_one_line(tmp_path, worker_cpu_s):
     register: exit 130, one line, no worker traceback, nothing left running."""
     cmd = [sys.executable, "-m", "sixdpose.cli", "register", "--data", str(YCBV), "--split", "train_real",
            "--method", "ransac", "--icp", "--workers", "2", "--no-progress", "--out", str(tmp_path / "r.csv")]
+    # a terminal's Ctrl-C reaches a process whose SIGINT is at its default: reset it in the child, since a
+    # test runner started in the background (or after something in this process ignored SIGINT) would
+    # hand its ignored SIGINT down, and a process started with SIGINT ignored rightly keeps it ignored
     proc = subprocess.Popen(cmd, env=_env(), start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+                            text=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         workers = _wait_for_busy_workers(proc, 2, cpu_s=worker_cpu_s)
         for pid in workers:  # a worker ignores SIGINT (the parent alone reacts to it)
             os.kill(pid, signal.SIGINT)
         time.sleep(1.0)
         assert {pid for pid, _ in _session(proc.pid)} >= set(workers)
+        # the parent ignores SIGINT while it starts the pool (sixdpose.workers.sigint_ignored): wait until
+        # it handles SIGINT again (its SigIgn mask in /proc), so the Ctrl-C below is not lost to that window
+        deadline = time.monotonic() + 30
+        while _sigint_ignored(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not _sigint_ignored(proc.pid), "the register process still ignores SIGINT 30 s after its pool started"
         os.killpg(proc.pid, signal.SIGINT)
         out, err = proc.communicate(timeout=30)
         _assert_session_ends(proc.pid, within=5.0)
