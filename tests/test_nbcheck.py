@@ -4,6 +4,7 @@ alters a notebook's counts fails; the references match the notebooks' marked cel
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import nbformat
@@ -35,14 +36,14 @@ def test_nbval_fails_when_a_checked_output_changes(tmp_path):
     executed, reference = tmp_path / "executed", tmp_path / "reference"
     source = "# NBVAL_CHECK_OUTPUT\nprint(f'{N * 2} rows')"
     _executed(executed / "p" / "01_x.ipynb", source, "6 rows\n")
-    assert nbcheck.record(executed / "p", reference / "p") == [reference / "p" / "01_x.ipynb"]
+    assert nbcheck.record(executed / "p", reference / "p") == [reference / "p" / "01_x.json"]
     # the recorded output is what the notebook prints again: nbval passes
     args = (reference, executed, tmp_path / "run", tmp_path)
     assert nbcheck.check(*args) == 0
     # a reference that differs from what the notebook prints (the notebook's result changed): nbval fails
-    ref = nbformat.read(reference / "p" / "01_x.ipynb", as_version=4)
-    ref.cells[0].outputs[0]["text"] = "7 rows\n"
-    nbformat.write(ref, reference / "p" / "01_x.ipynb")
+    ref = json.loads((reference / "p" / "01_x.json").read_text())
+    ref["cells"][0]["outputs"][0]["text"] = "7 rows\n"
+    (reference / "p" / "01_x.json").write_text(json.dumps(ref))
     assert nbcheck.check(*args) != 0
 
 
@@ -50,11 +51,11 @@ def test_references_and_marked_cells(tmp_path):
     executed, reference = tmp_path / "executed", tmp_path / "reference"
     _executed(executed / "p" / "01_x.ipynb", "# NBVAL_CHECK_OUTPUT\nprint(N)", "3\n")
     nbcheck.record(executed / "p", reference / "p")
-    ref = nbformat.read(reference / "p" / "01_x.ipynb", as_version=4)
-    assert len(ref.cells) == 1 and ref.cells[0].outputs[0]["text"] == "3\n"  # the marked cell alone
-    again = (reference / "p" / "01_x.ipynb").read_text()
+    ref = nbcheck.read_reference(reference / "p" / "01_x.json")
+    assert len(ref) == 1 and ref[0]["outputs"][0]["text"] == "3\n"  # the marked cell alone
+    again = (reference / "p" / "01_x.json").read_text()
     nbcheck.record(executed / "p", reference / "p")
-    assert (reference / "p" / "01_x.ipynb").read_text() == again  # recording again writes the same file
+    assert (reference / "p" / "01_x.json").read_text() == again  # recording again writes the same file
     out = tmp_path / "run"
     (nb,) = nbcheck.prepare(reference, executed, out, tmp_path)
     cells = nbformat.read(nb, as_version=4).cells
@@ -73,23 +74,27 @@ def test_references_and_marked_cells(tmp_path):
     nbformat.write(nb, executed / "q" / "02_y.ipynb")
     with pytest.raises(nbcheck.NbcheckError, match="stderr"):
         nbcheck.record(executed / "q", reference / "q")
+    # a reference with bad content: one line naming the file and the key
+    (reference / "p" / "01_x.json").write_text('{"cells": [{"source": 1}]}')
+    with pytest.raises(nbcheck.NbcheckError, match=r"01_x.json: key 'cells\[0\]'"):
+        nbcheck.read_reference(reference / "p" / "01_x.json")
     # no reference at all: nothing to check
     assert nbcheck.check(tmp_path / "none", executed, out, tmp_path) == 0
 
 
-@pytest.mark.parametrize("ref", sorted(REFERENCE.glob("*/[0-9][0-9]_*.ipynb")),
+@pytest.mark.parametrize("ref", sorted(REFERENCE.glob("*/[0-9][0-9]_*.json")),
                          ids=lambda p: f"{p.parent.name}/{p.stem}")
 def test_the_committed_references_match_the_notebooks(ref):
     """Each reference holds the marked cells of its notebook, as they are now (else `make nbval` stops
     with "record it again"), and only stdout."""
-    nb = nbformat.read(REPO / "notebooks" / ref.name, as_version=4)
-    cells = nbformat.read(ref, as_version=4).cells
-    assert [c.source.strip() for c in nbcheck.marked(nb)] == [c.source.strip() for c in cells], (
-        f"{ref}: the marked cells of notebooks/{ref.name} changed; `make nbval-reference "
+    nb = nbformat.read(REPO / "notebooks" / f"{ref.stem}.ipynb", as_version=4)
+    cells = nbcheck.read_reference(ref)
+    assert [c.source.strip() for c in nbcheck.marked(nb)] == [c["source"].strip() for c in cells], (
+        f"{ref}: the marked cells of notebooks/{ref.stem}.ipynb changed; `make nbval-reference "
         f"PROFILE={ref.parent.name}` after the notebook ran records them again")
-    assert all(o.get("name") == "stdout" for c in cells for o in c.outputs)
+    assert all(o.get("name") == "stdout" for c in cells for o in c["outputs"])
 
 
 def test_the_cpu_write_up_has_a_reference():
     """`make test` checks notebook 07 on the committed results (`make tables PROFILE=cpu`) at least."""
-    assert (REFERENCE / "cpu" / "07_evaluation.ipynb").is_file()
+    assert (REFERENCE / "cpu" / "07_evaluation.json").is_file()

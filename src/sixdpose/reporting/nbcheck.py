@@ -2,11 +2,12 @@
 
 Papermill executes a notebook and fails when a cell raises; a change that silently alters what a notebook
 finds passes. The cells whose output is deterministic (counts, table shapes, dataset statistics) carry the
-line ``# NBVAL_CHECK_OUTPUT``; their outputs, as one run of the graph printed them, are committed in
-``notebooks/reference/<profile>/NN_name.ipynb`` (only those cells: the notebooks themselves stay without
-outputs). ``check`` takes each executed notebook of ``notebooks/executed/<profile>/`` that has a
-reference, puts the reference outputs into its marked cells and runs it again under ``pytest --nbval-lax``
-(nbval's mode that compares the marked cells only), so a marked cell that prints something else fails.
+line ``# NBVAL_CHECK_OUTPUT``; their sources and outputs, as one run of the graph printed them, are committed
+as JSON in ``notebooks/reference/<profile>/NN_name.json`` (only those cells, and not as a notebook: every
+committed notebook stays without outputs; :func:`read_reference` reads one). ``check`` takes each
+executed notebook of ``notebooks/executed/<profile>/`` that has a reference, puts the reference outputs into
+its marked cells and runs it again under ``pytest --nbval-lax`` (nbval's mode that compares the marked
+cells only), so a marked cell that prints something else fails.
 
 Usage (from the checkout's root; ``make nbval`` and ``make nbval-reference`` run them)::
 
@@ -22,6 +23,7 @@ target that writes it (exit status 2). A profile without references is skipped w
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import subprocess
 import sys
@@ -52,9 +54,34 @@ def _read(path: Path):
         raise NbcheckError(f"{path}: cannot read the notebook ({e})") from None
 
 
+def read_reference(path: str | Path) -> list[dict]:
+    """The marked cells of a reference file (``{"cells": [{"source": str, "outputs": [nbformat output]}]}``),
+    as ``[{"source", "outputs"}]`` with the outputs as nbformat nodes.
+
+    Raises:
+        NbcheckError: unreadable file or bad content (one line naming the file and key).
+    """
+    import nbformat
+
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise NbcheckError(f"{path}: cannot read the reference ({e})") from None
+    cells = doc.get("cells") if isinstance(doc, dict) else None
+    if not isinstance(cells, list):
+        raise NbcheckError(f"{path}: key 'cells': expected a list of cells")
+    out = []
+    for i, c in enumerate(cells):
+        if not (isinstance(c, dict) and isinstance(c.get("source"), str) and isinstance(c.get("outputs"), list)):
+            raise NbcheckError(f"{path}: key 'cells[{i}]': expected {{'source': str, 'outputs': list}}")
+        out.append({"source": c["source"], "outputs": [nbformat.from_dict(o) for o in c["outputs"]]})
+    return out
+
+
 def record(executed: str | Path, out: str | Path) -> list[Path]:
-    """Write the reference of every executed notebook in ``executed`` that has marked cells: a notebook of
-    those cells alone (source and outputs, no execution counts or metadata) at ``out/<name>.ipynb``.
+    """Write the reference of every executed notebook in ``executed`` that has marked cells: those cells
+    alone (source and outputs, no execution counts or metadata) as JSON at ``out/<name>.json``.
 
     Returns:
         the references written.
@@ -63,8 +90,6 @@ def record(executed: str | Path, out: str | Path) -> list[Path]:
         NbcheckError: ``executed`` holds no notebook, or a marked cell has no output or wrote to stderr
             (its output would not be deterministic).
     """
-    import nbformat
-
     executed, out = Path(executed), Path(out)
     nbs = sorted(executed.glob("[0-9][0-9]_*.ipynb"))
     if not nbs:
@@ -74,20 +99,18 @@ def record(executed: str | Path, out: str | Path) -> list[Path]:
         cells = marked(_read(p))
         if not cells:
             continue
-        ref = nbformat.v4.new_notebook()
-        for i, c in enumerate(cells):
+        ref = []
+        for c in cells:
             if not c.outputs:
                 raise NbcheckError(f"{p}: a cell marked {MARKER} has no output")
             if any(o.get("output_type") == "stream" and o.get("name") == "stderr" for o in c.outputs):
                 raise NbcheckError(f"{p}: a cell marked {MARKER} writes to stderr (not a deterministic output)")
-            cell = nbformat.v4.new_code_cell(c.source)
-            cell.outputs = [_clean(o) for o in c.outputs]
-            cell.id = f"check-{i}"  # stable: recording the same outputs again writes the same file
-            ref.cells.append(cell)
-        ref.metadata = {"kernelspec": {"name": "python3", "display_name": "Python 3", "language": "python"}}
+            ref.append({"source": c.source, "outputs": [_clean(o) for o in c.outputs]})
         out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / p.name, nbformat.writes(ref, version=4) + "\n")
-        written.append(out / p.name)
+        dest = out / f"{p.stem}.json"
+        # stable: recording the same outputs again writes the same file
+        atomic_write_text(dest, json.dumps({"cells": ref}, indent=1, sort_keys=True) + "\n")
+        written.append(dest)
     return written
 
 
@@ -104,7 +127,7 @@ def _clean(output):
 
 
 def prepare(reference: str | Path, executed: str | Path, out: str | Path, workdir: str | Path) -> list[Path]:
-    """The notebooks nbval runs: for each ``reference/<profile>/<name>.ipynb``, the executed notebook
+    """The notebooks nbval runs: for each ``reference/<profile>/<name>.json``, the executed notebook
     ``executed/<profile>/<name>.ipynb`` with the reference outputs in its marked cells and a first cell
     changing to ``workdir`` (where the graph executed it), written to ``out/<profile>/<name>.ipynb`` (``out``
     is emptied first).
@@ -122,15 +145,15 @@ def prepare(reference: str | Path, executed: str | Path, out: str | Path, workdi
     if out.exists():
         shutil.rmtree(out)
     written = []
-    for ref_path in sorted(reference.glob("*/[0-9][0-9]_*.ipynb")):
+    for ref_path in sorted(reference.glob("*/[0-9][0-9]_*.json")):
         profile = ref_path.parent.name
-        nb_path = executed / profile / ref_path.name
+        nb_path = executed / profile / f"{ref_path.stem}.ipynb"
         if not nb_path.is_file():
             raise NbcheckError(f"{nb_path}: not executed; `make {nb_path} PROFILE={profile}` executes it "
                                f"(its reference is {ref_path})")
-        nb, ref = _read(nb_path), _read(ref_path)
-        cells, ref_cells = marked(nb), ref.cells
-        if len(cells) != len(ref_cells) or any(a.source.strip() != b.source.strip()
+        nb, ref_cells = _read(nb_path), read_reference(ref_path)
+        cells = marked(nb)
+        if len(cells) != len(ref_cells) or any(a.source.strip() != b["source"].strip()
                                               for a, b in zip(cells, ref_cells, strict=False)):
             raise NbcheckError(
                 f"{ref_path}: the cells marked {MARKER} of {nb_path} differ from the reference's; check the "
@@ -139,13 +162,13 @@ def prepare(reference: str | Path, executed: str | Path, out: str | Path, workdi
             if c.cell_type == "code":
                 c.outputs = []
         for c, r in zip(cells, ref_cells, strict=True):
-            c.outputs = r.outputs
+            c.outputs = r["outputs"]
         cd = nbformat.v4.new_code_cell(f"import os\nos.chdir({str(Path(workdir).resolve())!r})")
         cd.id = "nbcheck-chdir"
         nb.cells.insert(0, cd)
         for n, c in enumerate(c for c in nb.cells if c.cell_type == "code"):
             c.execution_count = n + 1  # a cell nbval takes as not run (no count) may hold no output
-        dest = out / profile / ref_path.name
+        dest = out / profile / nb_path.name
         dest.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(dest, nbformat.writes(nb, version=4) + "\n")
         written.append(dest)
@@ -158,7 +181,7 @@ def check(reference: str | Path, executed: str | Path, out: str | Path, workdir:
     (0 when there is no reference to check)."""
     nbs = prepare(reference, executed, out, workdir)
     if not nbs:
-        print(f"nbcheck: no reference notebook in {reference}/<profile>/: nothing to check")
+        print(f"nbcheck: no reference in {reference}/<profile>/: nothing to check")
         return 0
     print(f"nbcheck: {len(nbs)} notebook(s) against {reference}/: " + ", ".join(str(p) for p in nbs))
     cmd = [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-p", "no:dash", "-q", "--nbval-lax",
@@ -171,7 +194,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m sixdpose.reporting.nbcheck", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     c = sub.add_parser("check", help="run the executed notebooks again; compare their marked cells with the reference")
-    c.add_argument("--reference", default="notebooks/reference", help="references, <profile>/NN_name.ipynb")
+    c.add_argument("--reference", default="notebooks/reference", help="references, <profile>/NN_name.json")
     c.add_argument("--executed", default="notebooks/executed", help="executed notebooks, <profile>/NN_name.ipynb")
     c.add_argument("--out", default="build/nbval", help="where the notebooks nbval runs are written")
     c.add_argument("--workdir", default="notebooks", help="the directory the graph executed the notebooks in")
