@@ -60,8 +60,10 @@ class _Server:
                 self.end_headers()
                 if self.path in server.cut:
                     part = part[: len(part) // 2]
-                self.wfile.write(part)
+                # counted before the write: the client may have read the whole body and the test asserted
+                # on `sent` before this thread runs again after the write
                 server.sent += len(part)
+                self.wfile.write(part)
                 self.wfile.flush()
                 self.close_connection = True
 
