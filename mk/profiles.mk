@@ -61,6 +61,15 @@ YCBV_POSE_paper := --profile paper
 YCBV_POSE_LONG_cpu   := --profile cpu --epochs 12 --set time_budget=0
 YCBV_POSE_LONG_paper := --profile paper
 
+# the dense head of the synthetic-to-real branch (runs/P/pose_ycbv_dense): the cpu profile with the dense head,
+# GroupNorm, 96 px crops, the decoupled loss and the sim-to-real augmentation (colour jitter, mask erosion and
+# dilation, depth noise and holes, crop jitter); 28 epochs (8,400 steps, about 48 CPU-minutes here); paper:
+# the paper profile with the same head and augmentation
+YCBV_DENSE_AUG   := --set head=dense --set norm=group --set dense_loss=decoupled --set colour_jitter=0.3 \
+	--set mask_jitter_px=3 --set depth_noise=0.004 --set depth_holes=0.2 --set crop_jitter=0.1
+YCBV_DENSE_cpu   := --profile cpu $(YCBV_DENSE_AUG) --set crop=96 --set epochs=28 --set lr_step_epochs=8 --set time_budget=0
+YCBV_DENSE_paper := --profile paper $(YCBV_DENSE_AUG)
+
 # `sixdpose pose-ablation` (notebook 05 shows its result results/P/pose_ablation_P.json): the budget of every
 # variant (equal epochs; on the paper's machine equal seconds) and, for smoke and demo, the images of the
 # held-out split scored (a pipeline check); cpu and paper score every image of data/val (never test)
@@ -68,6 +77,11 @@ ABLATION_smoke := --epochs 3 --limit 4
 ABLATION_demo  := --epochs 3 --limit 6
 ABLATION_cpu   := --epochs 1
 ABLATION_paper := --time-budget 1200
+# the claims' ablation over seeds (results/P/pose_ablation_seeds_P.json: notebook 05, the write-up's claims
+# table): the centroid-offset network without and with GroupNorm (variants 1 and 6) and the refiner trained
+# on variant 1's network with the paper's pose noise and without, seeds 0, 1 and 2, the budget above (its
+# seed-0 networks are those of the ablation above: the same run directories)
+ABLATION_SEEDS := --variants 1,6 --seeds 3 --refiner-noise
 
 # ---- the column of $(PROFILE) ----
 _IDX := $(strip $(foreach i,1 2 3 4 5 6 7 8,$(if $(filter $(PROFILE),$(word $(i),$(PROFILES))),$(i))))

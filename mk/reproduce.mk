@@ -96,6 +96,11 @@ ABLATION_RESULT := $(RES)/pose_ablation_$(PROFILE).json
 $(ABLATION_RESULT): $(TRAIN_DIR)/manifest.json $(ABLATION_VAL)/manifest.json | $(VENV_OK)
 	$(SIXDPOSE) pose-ablation --data $(TRAIN_DIR) --val $(ABLATION_VAL) --out $(RUNS)/pose_ablation --profile $(P_POSE) \
 	  $(ABLATION_$(PROFILE)) --no-progress --result-name pose_ablation_$(PROFILE) --results-dir $(RES)
+# ... and over seeds (ABLATION_SEEDS), after it: its seed-0 runs are the ones above
+ABLATION_SEEDS_RESULT := $(RES)/pose_ablation_seeds_$(PROFILE).json
+$(ABLATION_SEEDS_RESULT): $(TRAIN_DIR)/manifest.json $(ABLATION_VAL)/manifest.json | $(VENV_OK) $(ABLATION_RESULT)
+	$(SIXDPOSE) pose-ablation --data $(TRAIN_DIR) --val $(ABLATION_VAL) --out $(RUNS)/pose_ablation --profile $(P_POSE) \
+	  $(ABLATION_$(PROFILE)) $(ABLATION_SEEDS) --no-progress --result-name pose_ablation_seeds_$(PROFILE) --results-dir $(RES)
 
 # ---- pose estimates: one results CSV per split x masks x method --------------------------------
 CMD_ransac         := register --method ransac
@@ -147,7 +152,7 @@ STAGES = $(IMAGENET_WEIGHTS) $(foreach g,$(DATASETS),data/$(g)/manifest.json) $(
 	$(RUNS)/seg/pred_test/meta.json $(YCBV_STAGES)
 # results of record: every split x masks x method, the kinect rows and the ablation
 RESULTS := $(foreach s,$(SPLITS),$(foreach k,$(MASKS),$(foreach m,$(METHODS),$(RES)/$(s)_$(k)_$(m).json))) \
-	$(KINECT_RESULTS) $(ABLATION_RESULT)
+	$(KINECT_RESULTS) $(ABLATION_RESULT) $(ABLATION_SEEDS_RESULT)
 
 # ---- synthetic to real (notebook 09): networks trained only on generated YCB-Video data -----------
 # YCBV_REAL (a BOP YCB-Video root, split YCBV_SPLIT) holds the real frames they are scored on, with the
@@ -183,6 +188,10 @@ $(foreach r,pose_ycbv pose_ycbv_ideal,$(eval $(RUNS)/$(subst pose,refiner,$(r))/
 	$(DATA_$(r))/manifest.json | $(VENV_OK) ; \
 	$(SIXDPOSE) train-refiner --pose $(RUNS)/$(r) --data $(DATA_$(r)) --out $$(@D) --no-progress \
 	  $$(if $$(wildcard $$(@D)/last.pt),--resume,$(YCBV_POSE_$(PROFILE)))))
+# the dense head (the project's own method): trained once, on kinect depth, with the sim-to-real augmentation
+$(RUNS)/pose_ycbv_dense/model.pt: data/ycbv/manifest.json | $(VENV_OK)
+	$(SIXDPOSE) train-pose --data data/ycbv --out $(@D) --no-progress \
+	  $(if $(wildcard $(@D)/last.pt),--resume,$(YCBV_DENSE_$(PROFILE)))
 # method -> command and the runs it needs
 YCBV_CMD_learned              := predict-pose --pose $(RUNS)/pose_ycbv
 YCBV_CMD_learned_it2          := predict-pose --pose $(RUNS)/pose_ycbv --refiner $(RUNS)/refiner_ycbv --iterations 2
@@ -199,8 +208,14 @@ YCBV_CMD_learned_ideal_jitter := predict-pose --pose $(RUNS)/pose_ycbv_ideal_jit
 YCBV_CMD_ransac_icp           := register --method ransac --icp --workers $(WORKERS) --min-px 0
 YCBV_CMD_fgr_icp              := register --method fgr --icp --workers $(WORKERS) --min-px 0
 YCBV_CMD_super4pcs_icp        := register --method super4pcs --icp --workers $(WORKERS) --min-px 0
+YCBV_CMD_super4pcs_icp_verify := register --method super4pcs --icp --verify --workers $(WORKERS) --min-px 0
+YCBV_CMD_dense                := predict-pose --pose $(RUNS)/pose_ycbv_dense
+YCBV_CMD_dense_icp            := predict-pose --pose $(RUNS)/pose_ycbv_dense --icp
+YCBV_CMD_dense_verify         := predict-pose --pose $(RUNS)/pose_ycbv_dense --verify
+YCBV_CMD_dense_icp_verify     := predict-pose --pose $(RUNS)/pose_ycbv_dense --icp --verify
 YCBV_METHODS := learned learned_it2 learned_icp learned_colour learned_ideal learned_ideal_it2 learned_ideal_icp \
-	learned_ideal_colour learned_e12 learned_ideal_e12 learned_jitter learned_ideal_jitter ransac_icp fgr_icp super4pcs_icp
+	learned_ideal_colour learned_e12 learned_ideal_e12 learned_jitter learned_ideal_jitter dense dense_icp dense_verify \
+	dense_icp_verify ransac_icp fgr_icp super4pcs_icp super4pcs_icp_verify
 YCBV_SCORED := $(if $(_E12_SAME),$(filter-out %_e12,$(YCBV_METHODS)),$(YCBV_METHODS))
 # the model.pt of every run a command names (--pose, --refiner)
 _ycbv_needs = $(foreach w,$(filter $(RUNS)/%,$(YCBV_CMD_$(1))),$(w)/model.pt)
@@ -213,7 +228,7 @@ $(RES)/$(YCBV_NAME)_gt_$(1).json: $(POSES)/$(YCBV_NAME)_gt_$(1).csv | $(VENV_OK)
 	  --results $$< --no-progress --all-images --label $(YCBV_NAME)_gt_$(1) --result-name $(YCBV_NAME)_gt_$(1) --results-dir $(RES)
 endef
 $(foreach m,$(YCBV_SCORED),$(eval $(call ycbv_rule,$(m))))
-YCBV_STAGES := $(foreach r,$(YCBV_TRAINED) refiner_ycbv refiner_ycbv_ideal,$(RUNS)/$(r)/model.pt)
+YCBV_STAGES := $(foreach r,$(YCBV_TRAINED) refiner_ycbv refiner_ycbv_ideal pose_ycbv_dense,$(RUNS)/$(r)/model.pt)
 YCBV_RESULTS := $(foreach m,$(YCBV_SCORED),$(RES)/$(YCBV_NAME)_gt_$(m).json)
 NB09_ARGS := -p TRAIN_DATA ../data/ycbv -p POSE_RUN ../$(RUNS)/pose_ycbv -p REFINER_RUN ../$(RUNS)/refiner_ycbv \
 	-p IDEAL_RUN ../$(RUNS)/pose_ycbv_ideal -p POSE_PROFILE $(P_POSE)
@@ -313,7 +328,7 @@ $(EXEC)/04_hybrid_registration.ipynb: notebooks/04_hybrid_registration.ipynb $(T
 	  -p MAX_IMAGES $(P_NB04) -p WORKERS $(WORKERS) $(NB_FIG))
 
 $(EXEC)/05_train_pose_network.ipynb: notebooks/05_train_pose_network.ipynb $(RUNS)/pose/model.pt $(DATA_test)/manifest.json \
-	$(ABLATION_RESULT) | $(VENV_OK)
+	$(ABLATION_RESULT) $(ABLATION_SEEDS_RESULT) | $(VENV_OK)
 	$(call papermill,$<,-p PROFILE $(PROFILE) -p DATA ../$(TRAIN_DIR) -p TEST_DATA ../$(DATA_test) -p RUN_DIR ../$(RUNS)/pose \
 	  -p POSE_PROFILE $(P_POSE) -p RESULTS ../$(RES) $(NB_FIG))
 
@@ -331,7 +346,7 @@ $(EXEC)/08_real_data.ipynb: notebooks/08_real_data.ipynb $(KINECT_RESULTS) $(KIN
 # statistics of notebook 02). Besides TEX_OUT and FIG_OUT it writes the charts of the tables
 # (sixdpose.reporting.charts: table3.png, table2_fps.png, per_object_<split>_<masks>.png, real_frames.png,
 # real_threshold.png, ablation.png, where there are results) and fig7.png where its inputs are here.
-TEX_OUT := $(addprefix $(GEN)/,macros.tex table1.tex table2.tex table2_e2e.tex table3.tex claims.tex table_dataset.tex table_real.tex table_ablation.tex \
+TEX_OUT := $(addprefix $(GEN)/,macros.tex table1.tex table2.tex table2_e2e.tex table3.tex claims.tex table_dataset.tex table_real.tex table_ablation.tex table_ablation_seeds.tex \
 	$(foreach s,$(SPLITS),$(foreach k,$(MASKS),per_object_$(s)_$(k).tex)))
 FIG_OUT := $(addprefix $(FIG)/,accuracy_threshold.png table1.csv table2.csv table2_e2e.csv table3.csv claims.csv)
 # precious: a failed run of notebook 07 (which writes each file atomically) leaves the tables as they were

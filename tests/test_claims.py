@@ -92,6 +92,31 @@ def test_the_ablation_decides_only_with_seeds(tmp_path):
     assert _by_key(C.claims(d, "cpu"))["normalisation"].verdict == "inconclusive"
 
 
+def test_the_refiner_noise_claim_from_the_ablation_over_seeds(tmp_path):
+    d = tmp_path / "results"
+    base = {"translation": "centroid_offset", "rotation": "quaternion", "norm": "none", "steps": 300}
+    write_result("pose_ablation_cpu", [dict(base, variant="a", val_add=14.0)], results_dir=d)  # one seed, no refiner
+
+    def seeded(noisy, clean, std, seeds=3):
+        write_result("pose_ablation_seeds_cpu", [
+            dict(base, variant="base", network="pose", val_add=14.0, val_add_std=1.0, seeds=seeds),
+            dict(base, variant="refiner trained with noise (paper)", network="refiner", val_add=noisy,
+                 val_add_std=std, seeds=seeds),
+            dict(base, variant="refiner trained without noise", network="refiner", val_add=clean, val_add_std=std,
+                 seeds=seeds)], results_dir=d)
+        return _by_key(C.claims(d, "cpu"))
+
+    got = seeded(30.0, 20.0, 1.0)  # the seeded result is read before the one-seed one
+    assert got["refiner_noise"].verdict == "supported" and "3 seed(s)" in got["refiner_noise"].figure
+    assert "with noise 30.00 +- 1.00 %, without 20.00 +- 1.00 %" in got["refiner_noise"].figure
+    # the refiner rows are not norm variants: one pose row alone has no pair with and without a norm layer
+    assert got["normalisation"].figure.startswith("no result")
+    assert seeded(20.0, 30.0, 1.0)["refiner_noise"].verdict == "contradicted"
+    assert seeded(21.0, 20.0, 1.0)["refiner_noise"].verdict == "inconclusive"
+    got = seeded(30.0, 20.0, 1.0, seeds=2)
+    assert got["refiner_noise"].verdict == "inconclusive" and "fewer than 3 seeds" in got["refiner_noise"].why
+
+
 def test_the_committed_cpu_results_and_the_tex(tmp_path):
     rows = C.write_claims(REPO / "results" / "cpu", "cpu", tmp_path / "claims.csv", tmp_path / "claims.tex")
     got = _by_key(rows)

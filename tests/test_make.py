@@ -69,19 +69,23 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
     kinect_gen = f".venv/bin/sixdpose generate --profile {splits[0][5:]} --set sensor=kinect --out {kinect} "
     assert any(line.startswith(kinect_gen) for line in _lines(out, "generate"))
     # paper: the pair trained "twice as long" would be the base pair again (the paper profile both times): left out
-    n_real = {"cpu": 15, "paper": 13}.get(profile, 0)
+    n_real = {"cpu": 20, "paper": 18}.get(profile, 0)
     assert len(real) == n_real and len(_lines(out, "evaluate")) == len(evals) + len(real) + 2
     assert ({"data/ycbv", "data/ycbv_ideal"} <= gen) == ycbv
     # without the branch, notebook 09's smoke network and refiner on a tiny ycbv dataset
     assert (f"data/ycbv_{profile}" in gen) == (not ycbv)
     assert len([line for line in _lines(out, "train-pose") if "pose_ycbv" in line]) == \
-        {"cpu": 6, "paper": 4}.get(profile, 1)
+        {"cpu": 7, "paper": 5}.get(profile, 1)
     assert len([line for line in _lines(out, "train-refiner") if "refiner_ycbv" in line]) == (2 if ycbv else 1)
-    # notebook 05's ablation: one pose-ablation command writing results/P/pose_ablation_P.json
+    # notebook 05's ablations: each option alone (results/P/pose_ablation_P.json), then over 3 seeds with the
+    # refiner-noise rows (pose_ablation_seeds_P.json), in the same run directory (shared seed-0 networks)
     ablation = re.findall(r"sixdpose pose-ablation (.*?)--result-name (\S+) --results-dir (\S+)",
                           out.replace("\\\n", ""))
-    assert len(ablation) == 1 and ablation[0][1:] == (f"pose_ablation_{profile}", f"results/{profile}")
-    assert ("--val data/val" in ablation[0][0]) == (profile in ("cpu", "paper"))
+    assert [a[1:] for a in ablation] == [(f"pose_ablation_{profile}", f"results/{profile}"),
+                                         (f"pose_ablation_seeds_{profile}", f"results/{profile}")]
+    assert all(("--val data/val" in a[0]) == (profile in ("cpu", "paper")) for a in ablation)
+    assert "--seeds 3 --refiner-noise" in ablation[1][0] and "--seeds" not in ablation[0][0]
+    assert len({re.search(r"--out (\S+)", a[0]).group(1) for a in ablation}) == 1
     long = [line for line in _lines(out, "train-pose") if "_e12" in line]  # the pair trained twice as long
     assert len(long) == (2 if profile == "cpu" else 0) and all(
         ("--epochs 12" in line) == (profile == "cpu") or "--resume" in line for line in long)

@@ -249,8 +249,9 @@ def test_real_frames_and_ablation_tables(tmp_path):
     rows = report.write_real_table(d, tmp_path / "r.csv", tmp_path / "r.tex")
     assert rows == [] and "not run at this profile" in (tmp_path / "r.tex").read_text()
     f = report.beyond_findings(d, "cpu")
-    assert set(f) == {"finding@real", "finding@sensor", "finding@ablation", "finding@fps_e2e"}
-    assert f["finding@sensor"] == ""
+    assert set(f) == {"finding@real", "finding@sensor", "finding@ablation", "finding@ablation_seeds",
+                      "finding@fps_e2e"}
+    assert f["finding@sensor"] == "" and "has not run the ablation over seeds" in f["finding@ablation_seeds"]
     assert "does not run that branch" in f["finding@real"] and "has not run the ablation" in f["finding@ablation"]
     for name, acc, auc in (("ycbv_gt_learned", 36.0, 85.0), ("ycbv_gt_learned_ideal", 36.0, 76.0),
                            ("ycbv_gt_learned_colour", 75.0, 90.0), ("ycbv_gt_super4pcs_icp", 90.0, 97.0)):
@@ -294,6 +295,16 @@ def test_real_frames_and_ablation_tables(tmp_path):
     assert "paper's choices reach 3.00 %" in f["finding@ablation"]
     abl = report.write_ablation_table(d, "cpu", tmp_path / "a.csv", tmp_path / "a.tex")
     assert [r["val_add"] for r in abl] == [3.0, 14.0] and "centroid offset" in (tmp_path / "a.tex").read_text()
+    assert [(r["network"], r["seeds"]) for r in abl] == [("pose", 1), ("pose", 1)]  # a one-seed result's defaults
+    write_result("pose_ablation_seeds_cpu", [
+        {"variant": "+ centroid offset", "network": "pose", "val_add": 14.0, "val_add_std": 1.5, "seeds": 3},
+        {"variant": "refiner trained without noise", "network": "refiner", "val_add": 20.0, "val_add_std": 2.0,
+         "seeds": 3}], results_dir=d)
+    f = report.beyond_findings(d, "cpu")
+    assert f["finding@ablation_seeds"] == ("Over 3 seeds: + centroid offset 14.00 +- 1.50 %; refiner trained without "
+                                           "noise 20.00 +- 2.00 %.")
+    abl = report.write_ablation_table(d, "cpu", tmp_path / "s.csv", tmp_path / "s.tex", name="pose_ablation_seeds")
+    assert [r["val_add_std"] for r in abl] == [1.5, 2.0] and "refiner" in (tmp_path / "s.tex").read_text()
 
 
 def test_paper_settings_rows_appear_only_with_their_results(results, tmp_path):

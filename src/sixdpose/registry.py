@@ -106,8 +106,17 @@ _LEARNED_REAL = (
     ("_icp", "learned + ICP", "", " --icp"),
     ("_colour", "learned + colour verification", "", " --colour-verify"),
 )
+#: The dense head's rows (the project's own method, trained once, on kinect depth, with the sim-to-real
+#: augmentation of mk ``YCBV_DENSE_<profile>``): (key suffix, label, further predict-pose arguments).
+_DENSE_REAL = (
+    ("", "dense head", ""),
+    ("_icp", "dense head + ICP", " --icp"),
+    ("_verify", "dense head + verification", " --verify"),
+    ("_icp_verify", "dense head + ICP + verification", " --icp --verify"),
+)
 #: The rows of the real-frames table, in table order: each learned variant on kinect, then on ideal
-#: depth; then the hybrid methods with ICP.
+#: depth; the dense head's rows; then the hybrid methods with ICP, and the best of them (Super4PCS) with
+#: the verification stage.
 REAL_METHODS: tuple[RealMethod, ...] = (
     *(
         RealMethod(f"learned{d}{suffix}", label, trained_on,
@@ -116,10 +125,17 @@ REAL_METHODS: tuple[RealMethod, ...] = (
         for d, trained_on in (("", "ycbv (kinect depth)"), ("_ideal", "ycbv_ideal (ideal depth)"))
     ),
     *(
+        RealMethod(f"dense{suffix}", label, "ycbv (kinect depth)",
+                   f"predict-pose --pose {{runs}}/pose_ycbv_dense{more}")
+        for suffix, label, more in _DENSE_REAL
+    ),
+    *(
         RealMethod(f"{algo}_icp", f"{name} + ICP", "",
                    f"register --method {algo} --icp --workers {{workers}} --min-px 0")
         for algo, name in HYBRID_ALGORITHMS.items()
     ),
+    RealMethod("super4pcs_icp_verify", "Super4PCS + ICP + verification", "",
+               "register --method super4pcs --icp --verify --workers {workers} --min-px 0"),
 )
 
 #: The profiles of the ``make reproduce`` graph (mk/profiles.mk ``PROFILES``), smallest first.

@@ -7,6 +7,17 @@ ground-truth masks, instances with >= ``min_px`` visible pixels) on a held-out s
 which option gives the best network in the time they have; the steps and instances each variant
 reached are reported beside its accuracy. Runs are resumable: a variant whose ``model.pt`` exists is
 scored, not retrained.
+
+Seeds (``seeds``): every variant is trained once per seed (initialisation, shuffling and sampling); its row
+holds the mean ``val_add`` over the seeds, their sample standard deviation ``val_add_std`` (0 with one
+seed), ``seeds`` and the per-seed figures ``val_add_per_seed``. The paper's claims are decided on the
+mean against that spread (:mod:`sixdpose.reporting.claims`).
+
+The refiner (``refiner_variants``, :data:`REFINER_VARIANTS`): the paper trains it on the main network's
+poses perturbed by noise and says (section IV-C5) this "makes the refinement model significantly more
+effective, however, this is not yet provably demonstrated by ablation studies". Each refiner variant is
+trained, per seed, on that seed's network of the first pose variant, with the same budget (``epochs``
+or ``time_budget``), and scored after 2 refinement iterations; its row has ``network`` = ``refiner``.
 """
 
 from __future__ import annotations
@@ -32,7 +43,40 @@ VARIANTS: dict[str, dict] = {
     "centroid offset + batch norm": {"translation": "centroid_offset", "rotation": "quaternion", "norm": "batch"},
 }
 
-COLUMNS = ("variant", "translation", "rotation", "norm", "epochs", "steps", "train_seconds", "val_add", "n_val")
+#: The refiner variants: :class:`~sixdpose.pose.config.RefinerConfig` overrides (the paper's noise, and none).
+REFINER_VARIANTS: dict[str, dict] = {
+    "refiner trained with noise (paper)": {},
+    "refiner trained without noise": {"noise_rot_deg": 0.0, "noise_trans": 0.0},
+}
+
+COLUMNS = ("variant", "network", "translation", "rotation", "norm", "epochs", "steps", "train_seconds", "val_add",
+           "val_add_std", "seeds", "val_add_per_seed", "n_val")
+
+
+def _slug(name: str) -> str:
+    return "".join(c if c.isalnum() else "_" for c in name.lower()).strip("_")[:40]
+
+
+def _summary(name: str, network: str, cfg: dict, runs: list[dict]) -> dict:
+    """One row of the table from the per-seed ``runs`` (``epochs, steps, train_seconds, val_add, n_val``)."""
+    import statistics
+
+    acc = [r["val_add"] for r in runs]
+    return {
+        "variant": name,
+        "network": network,
+        "translation": cfg["translation"],
+        "rotation": cfg["rotation"],
+        "norm": cfg["norm"],
+        "epochs": runs[0]["epochs"],
+        "steps": runs[0]["steps"],
+        "train_seconds": round(statistics.fmean(r["train_seconds"] for r in runs), 1),
+        "val_add": round(statistics.fmean(acc), 2),
+        "val_add_std": round(statistics.stdev(acc), 2) if len(acc) > 1 else 0.0,
+        "seeds": len(runs),
+        "val_add_per_seed": "/".join(f"{a:.2f}" for a in acc),
+        "n_val": runs[0]["n_val"],
+    }
 
 
 def run_ablation(
@@ -46,20 +90,31 @@ def run_ablation(
     min_px: int = MIN_VISIBLE_PX,
     val_images: int = 0,
     progress: bool = False,
+    seeds=(0,),
+    refiner_variants: dict | None = None,
     **overrides,
 ):
-    """Train each variant for the same budget and score it on ``val``.
+    """Train each variant (per seed) for the same budget and score it on ``val``.
 
     Args:
         train: training dataset (reader or path). val: held-out dataset (reader or path; tune on
-            ``val``, never on ``test``). out_dir: one run directory per variant is created below it
-            (``out_dir/<k>_<slug>``).
+            ``val``, never on ``test``). out_dir: one run directory per variant and seed is created below
+            it (``out_dir/<k>_<slug>``, ``k`` the variant's index in :data:`VARIANTS`, else its position in
+            ``variants``), so ablations picking different variants into one ``out_dir`` share the runs
+            they have in common.
         profile: base PoseConfig profile. time_budget: seconds per variant (None: the profile's).
         variants: ``{name: overrides}`` (default :data:`VARIANTS`). min_px: visible-pixel threshold of the
             scored instances. val_images: first N images of ``val`` (0: all). progress: progress bars.
-        **overrides: further PoseConfig overrides shared by every variant (e.g. ``epochs``).
+        seeds: the training seeds of every variant (>= 1; seed 0's runs keep the run names of a one-seed
+            ablation, the others get ``_s<seed>``). refiner_variants: ``{name: RefinerConfig
+            overrides}`` trained on each seed's network of the first variant (None or empty: none; see the
+            module docstring).
+        **overrides: further overrides shared by every variant (e.g. ``epochs``; the budget keys ``epochs``
+            and ``time_budget`` also apply to the refiners).
     Returns:
         ``pandas.DataFrame`` with the columns of :data:`COLUMNS`, one row per variant.
+    Raises:
+        ValueError: no seed.
     """
     import pandas as pd
 
@@ -75,27 +130,39 @@ def run_ablation(
     shared = dict(overrides)
     if time_budget is not None:
         shared["time_budget"] = float(time_budget)
-    rows = []
+    seeds = [int(x) for x in seeds]
+    if not seeds:
+        raise ValueError("seeds: give at least one training seed")
+    keys = val_r.keys()[:val_images] if val_images else None
+
+    def score(run, refiner=None) -> dict:
+        ckpt = load(refiner or run, kind="refiner" if refiner else None)
+        metrics = [r for r in read_metrics(refiner or run) if r["val_add"] is None]
+        est, _ = predict_dataset(val_r, run, refiner=refiner, iterations=2 if refiner else 0, limit=val_images)
+        res = evaluate(val_r, est, min_px=min_px, images=keys)
+        return {"epochs": ckpt["epoch"], "steps": metrics[-1]["step"] if metrics else 0,
+                "train_seconds": metrics[-1]["seconds"] if metrics else 0.0, "val_add": res.accuracy,
+                "n_val": res.n_gt, "config": ckpt["config"]}
+
+    rows, base_runs = [], []
     for k, (name, ov) in enumerate((variants or VARIANTS).items()):
-        slug = "".join(c if c.isalnum() else "_" for c in name.lower()).strip("_")[:40]
-        run = out_dir / f"{k}_{slug}"
-        ensure_trained("pose", train_r, run, profile=profile, progress=progress, **shared, **ov)
-        ckpt = load(run)
-        cfg = ckpt["config"]
-        metrics = [r for r in read_metrics(run) if r["val_add"] is None]
-        est, _ = predict_dataset(val_r, run, iterations=0, limit=val_images)
-        res = evaluate(val_r, est, min_px=min_px, images=val_r.keys()[:val_images] if val_images else None)
-        rows.append(
-            {
-                "variant": name,
-                "translation": cfg["translation"],
-                "rotation": cfg["rotation"],
-                "norm": cfg["norm"],
-                "epochs": ckpt["epoch"],
-                "steps": metrics[-1]["step"] if metrics else 0,
-                "train_seconds": round(metrics[-1]["seconds"], 1) if metrics else 0.0,
-                "val_add": round(res.accuracy, 2),
-                "n_val": res.n_gt,
-            }
-        )
+        if VARIANTS.get(name) == ov:  # a variant of the table keeps its run names whichever others are picked
+            k = list(VARIANTS).index(name)
+        runs = []
+        for seed in seeds:
+            run = out_dir / (f"{k}_{_slug(name)}" + (f"_s{seed}" if seed else ""))
+            ensure_trained("pose", train_r, run, profile=profile, progress=progress, **shared, **ov, seed=seed)
+            runs.append(score(run))
+            if k == 0:
+                base_runs.append(run)
+        rows.append(_summary(name, "pose", runs[0]["config"], runs))
+    budget = {key: shared[key] for key in ("epochs", "time_budget") if key in shared}
+    for k, (name, ov) in enumerate((refiner_variants or {}).items()):
+        runs = []
+        for seed, base in zip(seeds, base_runs, strict=True):
+            run = out_dir / (f"r{k}_{_slug(name)}" + (f"_s{seed}" if seed else ""))
+            ensure_trained("refiner", train_r, run, profile=profile, pose_run=base, progress=progress, **budget,
+                           **ov, seed=seed)
+            runs.append(score(base, refiner=run))
+        rows.append(_summary(name, "refiner", load(base_runs[0])["config"], runs))
     return pd.DataFrame(rows, columns=list(COLUMNS))

@@ -112,7 +112,7 @@ def _cmd_ablation(args) -> int:
     from ..artifacts.tables import write_table
     from ..errors import ConfigError
     from ..fileio import claim_output_dir
-    from .ablation import VARIANTS, run_ablation
+    from .ablation import REFINER_VARIANTS, VARIANTS, run_ablation
 
     setup_logging(args.verbose)
     names = list(VARIANTS)
@@ -145,6 +145,7 @@ def _cmd_ablation(args) -> int:
     claim_output_dir(args.out, "pose-ablation")  # refuse a foreign directory before any work
     table = run_ablation(args.data, args.val, args.out, profile=args.profile, variants={n: VARIANTS[n] for n in picked},
                          min_px=args.min_px, val_images=args.limit, progress=not args.no_progress,
+                         seeds=range(args.seeds), refiner_variants=REFINER_VARIANTS if args.refiner_noise else None,
                          **budget, **overrides)
     out = Path(args.out)
     write_table(table, list(table.columns), out / "ablation.csv", out / "ablation.tex")
@@ -152,9 +153,11 @@ def _cmd_ablation(args) -> int:
     if not args.no_result:
         path = write_result(result_name, table,
                             units={"train_seconds": "s", "val_add": "%", "n_val": "GT instances"},
-                            description=f"pose ablation: each variant trained on {args.data} ({budget}), ADD(-S) on "
-                                        f"{args.val} (GT masks, >= {args.min_px} visible px)",
-                            config={"profile": args.profile, **budget, **overrides},
+                            description=f"pose ablation: each variant trained on {args.data} ({budget}, "
+                                        f"{args.seeds} seed(s)), ADD(-S) on {args.val} (GT masks, >= {args.min_px} "
+                                        "visible px; mean and sample standard deviation over the seeds)",
+                            config={"profile": args.profile, **budget, **overrides, "seeds": args.seeds,
+                                    "refiner_noise": bool(args.refiner_noise)},
                             results_dir=args.results_dir)
         print(f"result -> {path}")
     return 0
@@ -233,6 +236,11 @@ def register(subparsers) -> None:
     O.add(p, "--epochs", help="epochs per variant (equal steps; time budget off)")
     O.add(p, "--time-budget", help="seconds of training per variant (equal time)")
     p.add_argument("--variants", default=None, help="comma-separated variant indices (default: all)")
+    p.add_argument("--seeds", type=O.Int(1, 100), default=1,
+                   help="train every variant with seeds 0..N-1; rows hold the mean, spread and per-seed ADD(-S)")
+    p.add_argument("--refiner-noise", dest="refiner_noise", action="store_true",
+                   help="also train the refiner with the paper's pose noise and without, on each seed's network of "
+                        "the first variant, scored after 2 iterations (the paper's claim of section IV-C5)")
     O.add(p, "--limit")
     O.add(p, "--min-px")
     O.add(p, "--results-dir", help="directory of the result artifact (default: results)")

@@ -38,6 +38,7 @@ TRANSLATIONS = ("absolute", "centroid_offset")
 ROTATIONS = ("quaternion", "6d")
 NORMS = ("none", "group", "batch")
 HEADS = ("paper", "dense")
+DENSE_LOSSES = ("densefusion", "decoupled")
 
 
 @dataclass(frozen=True)
@@ -80,6 +81,9 @@ class PoseConfig(FrameSchedule):
         head: ``paper`` (rotation and translation regression, section IV-C) or ``dense`` (the project's
             own: per-point object coordinates and confidences, the pose by RANSAC + weighted Kabsch;
             :mod:`sixdpose.pose.dense`; ``translation`` and ``rotation`` are then unused).
+        dense_loss: the dense head's loss, ``densefusion`` (``mean(d c - w log c)``) or ``decoupled`` (the
+            coordinates on the plain mean distance, the confidences on the DenseFusion term with the
+            distances detached; :func:`~sixdpose.pose.dense.dense_loss`).
         ransac_threshold: inlier distance (metres) of the dense head's robust fit at inference.
         ransac_iterations: hypotheses of that fit.
 
@@ -121,6 +125,7 @@ class PoseConfig(FrameSchedule):
     rotation: str = "quaternion"
     norm: str = "none"
     head: str = "paper"
+    dense_loss: str = "densefusion"
     ransac_threshold: float = bounded(0.015, min=0, max=1, min_open=True)
     ransac_iterations: int = bounded(128, min=1, max=100_000)
     rgb_noise: float = bounded(0.3, min=0, max=1)
@@ -146,6 +151,8 @@ class PoseConfig(FrameSchedule):
             raise ValueError(f"norm must be one of {NORMS}, got {self.norm!r}")
         if self.head not in HEADS:
             raise ValueError(f"head must be one of {HEADS}, got {self.head!r}")
+        if self.dense_loss not in DENSE_LOSSES:
+            raise ValueError(f"dense_loss must be one of {DENSE_LOSSES}, got {self.dense_loss!r}")
         if not self.ransac_threshold > 0 or self.ransac_iterations < 1:
             raise ValueError("ransac_threshold must be > 0 and ransac_iterations >= 1")
         if self.emb_dim < 1 or self.rgb_noise < 0:

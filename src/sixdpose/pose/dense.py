@@ -23,7 +23,11 @@ get their symmetries from the model's shape (:func:`discover_symmetries`): rotat
 axes that map the model points onto themselves within 2 % of the diameter.
 
 Loss (DenseFusion, Wang et al. 2019): ``mean_i (d_i c_i - w log c_i)`` with ``d_i = ||y^_i - y_i||``
-(metres) and ``w = 0.015`` (:func:`dense_loss`).
+(metres) and ``w = 0.015`` (:func:`dense_loss`, ``mode="densefusion"``). Its gradient on a point's
+coordinates is scaled by that point's confidence, which settles near ``w / d_i``: the points that are
+hardest early on (the two sides of a flip that texture alone decides) get the least gradient and can stay
+unlearnt. ``mode="decoupled"`` trains the coordinates on the plain mean distance and the confidences on
+the DenseFusion term with the distances detached (the confidence still learns to predict the error).
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ import torch
 import torch.nn.functional as F
 
 from ..registration import kabsch_batch
+from .config import DENSE_LOSSES
 
 #: Weight of the confidence regulariser of the loss (DenseFusion's ``w``).
 CONF_WEIGHT = 0.015
@@ -184,13 +189,16 @@ def coordinate_targets(cloud: np.ndarray, R: np.ndarray, t: np.ndarray, sym: Sym
 
 
 def dense_loss(coords: torch.Tensor, conf_logit: torch.Tensor, targets: torch.Tensor,
-               w: float = CONF_WEIGHT) -> tuple[torch.Tensor, torch.Tensor]:
-    """Per-instance dense loss ``mean_i (d_i c_i - w log c_i)``, minimised over the candidate target sets.
+               w: float = CONF_WEIGHT, mode: str = "densefusion") -> tuple[torch.Tensor, torch.Tensor]:
+    """Per-instance dense loss, minimised over the candidate target sets.
+
+    ``densefusion``: ``mean_i (d_i c_i - w log c_i)``; ``decoupled``: ``mean_i d_i + mean_i (sg(d_i) c_i -
+    w log c_i)`` (``sg``: no gradient), so every point's coordinates get the full gradient.
 
     Args:
         coords: (N, P, 3) predicted object coordinates, metres. conf_logit: (N, P) confidence logits
             (``c = sigmoid``). targets: (N, S, P, 3) candidate targets (:func:`coordinate_targets`,
-            padded by repeating a set). w: confidence weight.
+            padded by repeating a set). w: confidence weight. mode: one of :data:`DENSE_LOSSES`.
     Returns:
         ``(loss (N,), dist (N,))``: the loss and the mean point distance (metres) of the chosen set.
     """
@@ -198,7 +206,12 @@ def dense_loss(coords: torch.Tensor, conf_logit: torch.Tensor, targets: torch.Te
     best = d.mean(dim=2).argmin(dim=1)
     d = d[torch.arange(len(d), device=d.device), best]  # (N, P)
     c = torch.sigmoid(conf_logit)
-    loss = (d * c - w * F.logsigmoid(conf_logit)).mean(dim=1)
+    if mode == "decoupled":
+        loss = d.mean(dim=1) + (d.detach() * c - w * F.logsigmoid(conf_logit)).mean(dim=1)
+    elif mode == "densefusion":
+        loss = (d * c - w * F.logsigmoid(conf_logit)).mean(dim=1)
+    else:
+        raise ValueError(f"dense loss mode must be one of {DENSE_LOSSES}, got {mode!r}")
     return loss, d.mean(dim=1)
 
 

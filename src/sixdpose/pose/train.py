@@ -203,7 +203,8 @@ class PoseTask(TrainTask):
             tg = np.stack([np.concatenate([x, np.repeat(x[:1], S - len(x), axis=0)]) for x in tgs])
             with ctx.autocast():
                 out = net(images, img_index, choose, cloud, obj)
-            loss, _ = dense_loss(out["coords"].float(), out["conf_logit"].float(), torch.from_numpy(tg).to(dev))
+            loss, _ = dense_loss(out["coords"].float(), out["conf_logit"].float(), torch.from_numpy(tg).to(dev),
+                                 mode=getattr(cfg, "dense_loss", "densefusion"))
             return {"loss": loss.mean()}
         with ctx.autocast():
             if is_pose:

@@ -102,11 +102,15 @@ def _best(entries: dict, split: str, masks: str, kind: str) -> tuple[str, float,
     return key, acc, n
 
 
-def _ablation_rows(results_dir: Path, profile: str) -> list[dict]:
-    """Every row of ``pose_ablation_<profile>`` with every column (``seeds`` and ``val_add_std`` where an
-    ablation over seeds wrote them); empty when it has not run."""
-    r = _optional(results_dir, f"pose_ablation_{profile}")
-    return [] if r is None else [dict(row) for row in r.rows]
+def _ablation_rows(results_dir: Path, profile: str) -> tuple[str, list[dict]]:
+    """``(name, rows)``: the ablation over seeds ``pose_ablation_seeds_<profile>`` where it has run, else the
+    one-seed ``pose_ablation_<profile>``; every row with every column (``network`` ``pose`` where a result
+    from before the refiner rows lacks it); no rows when neither has run."""
+    for name in (f"pose_ablation_seeds_{profile}", f"pose_ablation_{profile}"):
+        r = _optional(results_dir, name)
+        if r is not None:
+            return name, [{"network": "pose", **row} for row in r.rows]
+    return f"pose_ablation_{profile}", []
 
 
 def refiner_noise(results_dir: Path, profile: str, entries: dict) -> Claim:
@@ -115,15 +119,26 @@ def refiner_noise(results_dir: Path, profile: str, entries: dict) -> Claim:
     (trained with noise) is shown and the verdict is inconclusive."""
     key, claim, where = ("refiner_noise", "Training the refiner on noisy poses makes refinement significantly "
                          "more effective (not ablated in the paper)", "IV-C5")
-    rows = [r for r in _ablation_rows(results_dir, profile) if "noise" in str(r.get("variant", "")).lower()]
+    name, rows = _ablation_rows(results_dir, profile)
+    rows = [r for r in rows if r.get("network") == "refiner" and r.get("val_add") is not None]
     it2, it0 = _acc(entries, ("test", "gt", "learned_it2")), _acc(entries, ("test", "gt", "learned_it0"))
     fig = ("refinement (refiner trained with noise) on the multi-instance split, GT masks: "
            f"{it0[0]:.2f} % -> {it2[0]:.2f} %" if it2 is not None and it0 is not None else "no refinement results")
-    if not rows:
+    noisy = [r for r in rows if "without" not in str(r["variant"]).lower()]
+    clean = [r for r in rows if "without" in str(r["variant"]).lower()]
+    if not noisy or not clean:
         return Claim(key, claim, where, fig, "inconclusive",
-                     f"no refiner trained without noise in pose_ablation_{profile} (not ablated)")
-    return Claim(key, claim, where, fig + f"; ablation rows: {len(rows)}", "inconclusive",
-                 f"fewer than {MIN_SEEDS} seeds per variant in the ablation")
+                     f"no refiner trained without noise in {name} (not ablated)")
+    a, b = noisy[0], clean[0]
+    seeds = min(int(a.get("seeds") or 1), int(b.get("seeds") or 1))
+    fig += (f"; ablation ({seeds} seed(s), val, 2 iterations): with noise {float(a['val_add']):.2f} +- "
+            f"{float(a.get('val_add_std') or 0):.2f} %, without {float(b['val_add']):.2f} +- "
+            f"{float(b.get('val_add_std') or 0):.2f} %")
+    if seeds < MIN_SEEDS:
+        return Claim(key, claim, where, fig, "inconclusive", f"fewer than {MIN_SEEDS} seeds per variant in {name}")
+    spread = float(a.get("val_add_std") or 0) + float(b.get("val_add_std") or 0)
+    verdict, why = _direction(float(a["val_add"]) - float(b["val_add"]), spread)
+    return Claim(key, claim, where, fig, verdict, f"mean over {seeds} seeds against the spread: {why}")
 
 
 def normalisation(results_dir: Path, profile: str, entries: dict) -> Claim:
@@ -132,16 +147,18 @@ def normalisation(results_dir: Path, profile: str, entries: dict) -> Claim:
     without; decided only with :data:`MIN_SEEDS` seeds and training long enough that the baseline learns."""
     key, claim, where = ("normalisation", "Normalisation layers make translation hard to learn and the model "
                          "ineffective; the paper removes them", "IV-C3")
-    rows = [r for r in _ablation_rows(results_dir, profile) if r.get("val_add") is not None]
+    name, rows = _ablation_rows(results_dir, profile)
+    rows = [r for r in rows if r.get("val_add") is not None and r.get("network") == "pose"]
     if not rows:
-        return _missing(key, claim, where, f"pose_ablation_{profile}")
+        return _missing(key, claim, where, name)
     base = {(r["translation"], r["rotation"]): r for r in rows if r.get("norm") == "none"}
     pairs = [(r, base[(r["translation"], r["rotation"])]) for r in rows
              if r.get("norm") not in (None, "none") and (r["translation"], r["rotation"]) in base]
     if not pairs:
         return _missing(key, claim, where, "a variant with and without a norm layer")
-    fig = "; ".join(f"{r['norm']} norm, {r['translation']} t: {r['val_add']:.2f} % against {b['val_add']:.2f} % "
-                    "without" for r, b in pairs)
+    pm = lambda r: f" +- {float(r['val_add_std']):.2f}" if r.get("val_add_std") else ""  # noqa: E731
+    fig = "; ".join(f"{r['norm']} norm, {r['translation']} t: {r['val_add']:.2f}{pm(r)} % against "
+                    f"{b['val_add']:.2f}{pm(b)} % without" for r, b in pairs)
     steps = {r.get("steps") for r in rows}
     seeds = min((int(r.get("seeds") or 1) for r in rows), default=1)
     dead = [b for _, b in pairs if float(b["val_add"]) == 0.0]
