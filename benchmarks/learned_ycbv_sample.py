@@ -14,11 +14,16 @@ networks are trained only on generated data; scene 000000 is the sample's tuning
 held-out one (leave-one-scene-out: choose on one column, report the other).
 
     python benchmarks/learned_ycbv_sample.py --pose dense=runs/pose_ycbv_dense [--work runs/learned_ycbv_sample]
+
+``--keep`` keeps the rows of the result file already there whose run label is not given this time (runs
+measured earlier, perhaps on another machine: each row names its pose run and the date it was measured),
+so a new run can be added beside the old ones without their run directories.
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
 import subprocess
 import sys
@@ -47,6 +52,7 @@ def main() -> None:
     ap.add_argument("--data", default="../shared/data/ycbv_sample")
     ap.add_argument("--work", default="runs/learned_ycbv_sample", help="results CSVs and evaluations")
     ap.add_argument("--results-dir", default="results")
+    ap.add_argument("--keep", action="store_true", help="keep the existing result's rows of the runs not given")
     a = ap.parse_args()
     work = Path(a.work)
     work.mkdir(parents=True, exist_ok=True)
@@ -61,7 +67,8 @@ def main() -> None:
             if not out.is_file():
                 _cli("predict-pose", "--pose", run, "--data", a.data, "--split", "train_real", "--masks", "gt",
                      "--no-progress", "--out", str(out), *switches)
-            row = {"run": label, "pose run": run, "variant": variant}
+            row = {"run": label, "pose run": run, "variant": variant,
+                   "measured": datetime.date.today().isoformat()}
             for part, col in (("0", "scene 000000 (tuning)"), ("1", "scene 000001 (held out)"), ("all", "both")):
                 ev = work / f"{stem}_eval_{part}"
                 _cli("evaluate", "--data", a.data, "--split", "train_real", "--symmetric-ids", SYMMETRIC_IDS,
@@ -72,6 +79,15 @@ def main() -> None:
             rows.append(row)
             inputs.append(str(out))
             print(row, flush=True)
+    old = Path(a.results_dir, "learned_ycbv_sample.json")
+    if a.keep and old.is_file():
+        given = {r["run"] for r in rows}
+        kept = [dict(r) for r in json.loads(old.read_text())["rows"] if r.get("run") not in given]
+        for r in kept:
+            r.setdefault("measured", "an earlier session (its run is not here)")
+        rows = rows + kept
+    rows = [{k: r.get(k) for k in ("run", "pose run", "variant", "measured", "scene 000000 (tuning)",
+                                   "scene 000001 (held out)", "both")} for r in rows]
     write_result("learned_ycbv_sample", rows, results_dir=a.results_dir, inputs=inputs,
                  description="predict-pose [--icp] [--verify] on ycbv_sample train_real (networks trained on generated "
                              "data only), GT masks, min-px 0, BOP symmetric ids 1,13,14,16,18-21: correct/GT per scene",

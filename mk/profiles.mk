@@ -63,7 +63,7 @@ YCBV_POSE_LONG_paper := --profile paper
 
 # the dense head of the synthetic-to-real branch (runs/P/pose_ycbv_dense): the cpu profile with the dense head,
 # GroupNorm, 96 px crops, the decoupled loss and the sim-to-real augmentation (colour jitter, mask erosion and
-# dilation, depth noise and holes, crop jitter); 28 epochs (8,400 steps, about 48 CPU-minutes here); paper:
+# dilation, depth noise and holes, crop jitter); 28 epochs (8,400 steps, 60 min of training here); paper:
 # the paper profile with the same head and augmentation
 YCBV_DENSE_AUG   := --set head=dense --set norm=group --set dense_loss=decoupled --set colour_jitter=0.3 \
 	--set mask_jitter_px=3 --set depth_noise=0.004 --set depth_holes=0.2 --set crop_jitter=0.1

@@ -220,16 +220,17 @@ def _ycbv_bop(src: Source) -> str:
     return table + note
 
 
-def _ycbv_real():
-    """``[(label, training data or "" for a hybrid method, result name)]`` of the real-frame rows, in the
-    order of :data:`sixdpose.registry.REAL_METHODS` (the write-up's table)."""
+def _ycbv_real(src: Source):
+    """``[(label, training data or "" for a hybrid method, result name)]`` of the real-frame rows that have a
+    result file, in the order of :data:`sixdpose.registry.REAL_METHODS` (the write-up's table, which also
+    leaves out the rows not run)."""
     return [(m.label, f"`{m.trained_on.split()[0]}` {' '.join(m.trained_on.split()[1:])}" if m.trained_on else "",
-             f"cpu/ycbv_gt_{m.key}") for m in REAL_METHODS]
+             f"cpu/ycbv_gt_{m.key}") for m in REAL_METHODS if src.exists(f"cpu/ycbv_gt_{m.key}")]
 
 
 def _ycbv_synthetic_to_real(src: Source) -> str:
     rows = []
-    for label, data, name in _ycbv_real():
+    for label, data, name in _ycbv_real(src):
         f = src(name).figures
         b = f.get("bop") or {}
         rows.append(
@@ -248,7 +249,7 @@ def _ycbv_synthetic_to_real(src: Source) -> str:
 
 
 def _ycbv_synthetic_to_real_per_object(src: Source) -> str:
-    cols = [(f"{label}{' (' + data.split()[0] + ')' if data else ''}", name) for label, data, name in _ycbv_real()
+    cols = [(f"{label}{' (' + data.split()[0] + ')' if data else ''}", name) for label, data, name in _ycbv_real(src)
             if "jitter" not in label]
     from ..assets.bop import BOP_YCB_MAPS
 
