@@ -55,6 +55,18 @@ def test_the_seeds_train_different_networks_and_the_refiners_their_noise(ablatio
     assert load(runs / "r0_refiner_trained_with_noise__paper")["config"]["noise_rot_deg"] > 0
 
 
+def test_variants_of_the_table_keep_their_run_names_and_feed_the_refiners(tmp_path):
+    from sixdpose.pose.ablation import REFINER_VARIANTS, VARIANTS, run_ablation
+
+    data = write_synthetic_dataset(tmp_path / "syn", n_images=1, two_instances_in_first=False)
+    picked = {n: VARIANTS[n] for n in list(VARIANTS)[1:2]}  # as `--variants 1`: index 1, first picked
+    table = run_ablation(data, data, tmp_path / "runs", profile="smoke", variants=picked, seeds=(0,),
+                         refiner_variants=dict(list(REFINER_VARIANTS.items())[:1]), epochs=1, time_budget=0.0)
+    assert list(table["network"]) == ["pose", "refiner"]
+    assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == ["1_centroid_offset",
+                                                                     "r0_refiner_trained_with_noise__paper"]
+
+
 def test_no_seed_is_refused(tmp_path):
     from sixdpose.pose.ablation import run_ablation
 

@@ -145,7 +145,8 @@ def run_ablation(
                 "n_val": res.n_gt, "config": ckpt["config"]}
 
     rows, base_runs = [], []
-    for k, (name, ov) in enumerate((variants or VARIANTS).items()):
+    for pos, (name, ov) in enumerate((variants or VARIANTS).items()):
+        k = pos
         if VARIANTS.get(name) == ov:  # a variant of the table keeps its run names whichever others are picked
             k = list(VARIANTS).index(name)
         runs = []
@@ -153,7 +154,7 @@ def run_ablation(
             run = out_dir / (f"{k}_{_slug(name)}" + (f"_s{seed}" if seed else ""))
             ensure_trained("pose", train_r, run, profile=profile, progress=progress, **shared, **ov, seed=seed)
             runs.append(score(run))
-            if k == 0:
+            if pos == 0:  # the refiners train on the first picked variant's networks
                 base_runs.append(run)
         rows.append(_summary(name, "pose", runs[0]["config"], runs))
     budget = {key: shared[key] for key in ("epochs", "time_budget") if key in shared}
