@@ -120,11 +120,13 @@ def test_the_refiner_noise_claim_from_the_ablation_over_seeds(tmp_path):
 def test_the_committed_cpu_results_and_the_tex(tmp_path):
     rows = C.write_claims(REPO / "results" / "cpu", "cpu", tmp_path / "claims.csv", tmp_path / "claims.tex")
     got = _by_key(rows)
-    # the issue's reading of the committed results: the real-frame hybrids contradict the paper's guess, and the
-    # 300-step ablation (absolute translation at 0 %) cannot decide the normalisation claim
+    # the committed results: the real-frame hybrids contradict the paper's guess; the ablation over 3 seeds
+    # (pose_ablation_seeds_cpu, read before the one-seed table) decides neither the normalisation nor the
+    # refiner-noise claim: both differences lie within the seeds' spread
     assert got["hybrids_real"].verdict == "contradicted"
-    assert got["normalisation"].verdict == "inconclusive" and "too short" in got["normalisation"].why
-    assert got["refiner_noise"].verdict == "inconclusive"
+    for key in ("normalisation", "refiner_noise"):
+        assert got[key].verdict == "inconclusive" and got[key].why.startswith("mean over 3 seeds"), key
+    assert "3 seed(s)" in got["refiner_noise"].figure
     tex = (tmp_path / "claims.tex").read_text()
     assert tex.startswith("\\begin{tabular}{p{") and "contradicted" in tex and "\\%" in tex
     assert set(C.VERDICTS) >= {c.verdict for c in rows}
