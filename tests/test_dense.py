@@ -289,3 +289,25 @@ def test_crop_window_jitter_moves_and_scales_the_window():
     y0, x0, side = crop_window(mask, 0.1, 0.2, np.random.default_rng(0))
     assert (y0, x0, side) != base
     assert base[2] * np.exp(-0.2) - 1e-9 <= side <= base[2] * np.exp(0.2) + 1e-9
+
+
+def test_the_decoupled_loss_gives_every_point_the_full_coordinate_gradient():
+    """``densefusion`` scales a point's coordinate gradient by its confidence; ``decoupled`` does not (the
+    confidences still learn from the detached distances); an unknown mode is refused."""
+    torch.manual_seed(0)
+    target = torch.randn(2, 1, 8, 3)
+    logit = torch.linspace(-4, 4, 16).view(2, 8)
+    grads = {}
+    for mode in ("densefusion", "decoupled"):
+        coords = (target[:, 0] + 0.05).clone().requires_grad_(True)
+        conf = logit.clone().requires_grad_(True)
+        loss, dist = dense_loss(coords, conf, target, mode=mode)
+        loss.sum().backward()
+        grads[mode] = (coords.grad.norm(dim=2), conf.grad)
+        assert torch.allclose(dist, torch.full((2,), 0.05 * math.sqrt(3)), atol=1e-6)
+    c = torch.sigmoid(logit)
+    assert torch.allclose(grads["densefusion"][0], grads["decoupled"][0] * c, atol=1e-6)  # scaled by c
+    assert torch.allclose(grads["decoupled"][0], grads["decoupled"][0][0, 0].expand(2, 8))  # equal for all
+    assert torch.allclose(grads["densefusion"][1], grads["decoupled"][1])  # the same confidence gradient
+    with pytest.raises(ValueError, match="dense loss mode"):
+        dense_loss(target[:, 0], logit, target, mode="l2")

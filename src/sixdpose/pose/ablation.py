@@ -156,6 +156,8 @@ def run_ablation(
             runs.append(score(run))
             if pos == 0:  # the refiners train on the first picked variant's networks
                 base_runs.append(run)
+        if pos == 0:
+            base_cfg = runs[0]["config"]
         rows.append(_summary(name, "pose", runs[0]["config"], runs))
     budget = {key: shared[key] for key in ("epochs", "time_budget") if key in shared}
     for k, (name, ov) in enumerate((refiner_variants or {}).items()):
@@ -165,5 +167,5 @@ def run_ablation(
             ensure_trained("refiner", train_r, run, profile=profile, pose_run=base, progress=progress, **budget,
                            **ov, seed=seed)
             runs.append(score(base, refiner=run))
-        rows.append(_summary(name, "refiner", load(base_runs[0])["config"], runs))
+        rows.append(_summary(name, "refiner", base_cfg, runs))
     return pd.DataFrame(rows, columns=list(COLUMNS))

@@ -204,7 +204,7 @@ class PoseTask(TrainTask):
             with ctx.autocast():
                 out = net(images, img_index, choose, cloud, obj)
             loss, _ = dense_loss(out["coords"].float(), out["conf_logit"].float(), torch.from_numpy(tg).to(dev),
-                                 mode=getattr(cfg, "dense_loss", "densefusion"))
+                                 mode=cfg.dense_loss)
             return {"loss": loss.mean()}
         with ctx.autocast():
             if is_pose:

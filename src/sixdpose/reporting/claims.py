@@ -25,7 +25,7 @@ from pathlib import Path
 from ..artifacts.tables import write_table
 from ..registry import METHOD, METHODS
 from .paper import TABLES
-from .report import TABLE2_BENCH, _optional, load_entries
+from .report import ABLATIONS, TABLE2_BENCH, _optional, ablation_table, load_entries
 
 #: Standard errors a difference of two accuracies must exceed to decide (about a 95 % two-sided test).
 Z_DECIDE = 2.0
@@ -103,14 +103,13 @@ def _best(entries: dict, split: str, masks: str, kind: str) -> tuple[str, float,
 
 
 def _ablation_rows(results_dir: Path, profile: str) -> tuple[str, list[dict]]:
-    """``(name, rows)``: the ablation over seeds ``pose_ablation_seeds_<profile>`` where it has run, else the
-    one-seed ``pose_ablation_<profile>``; every row with every column (``network`` ``pose`` where a result
-    from before the refiner rows lacks it); no rows when neither has run."""
-    for name in (f"pose_ablation_seeds_{profile}", f"pose_ablation_{profile}"):
-        r = _optional(results_dir, name)
-        if r is not None:
-            return name, [{"network": "pose", **row} for row in r.rows]
-    return f"pose_ablation_{profile}", []
+    """``(name, rows)``: the first of :data:`~.report.ABLATIONS` that has run for ``profile`` (over seeds, else
+    the one-seed ablation), its rows as :func:`~.report.ablation_table` reads them; no rows when neither has."""
+    for name in ABLATIONS:
+        rows = ablation_table(results_dir, profile, name)
+        if rows:
+            return f"{name}_{profile}", rows
+    return f"{ABLATIONS[-1]}_{profile}", []
 
 
 def refiner_noise(results_dir: Path, profile: str, entries: dict) -> Claim:
