@@ -10,9 +10,11 @@ Reads the evaluations of the results CSVs made by (for M in super4pcs, ransac, f
 
 (the ``_0`` / ``_1`` evaluations on the CSV's rows of scene 000000 / 000001) and writes the result
 artifacts ``results/verify_ycbv_sample.json`` (one row per method and switch) and
-``results/verify_ycbv_sample_per_object.json`` (one row per scene and object).
+``results/verify_ycbv_sample_per_object.json`` (one row per scene and object). ``--figure PNG`` also draws
+accuracy against instances per second per core (one register process: per core) from the first artifact
+(``--figure-only``: from the committed artifact, without the runs).
 
-    python benchmarks/verify_ycbv_sample.py [--runs runs/verify]
+    python benchmarks/verify_ycbv_sample.py [--runs runs/verify] [--figure figures/verify_ycbv_sample.png]
 """
 
 from __future__ import annotations
@@ -40,7 +42,16 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--runs", default="runs/verify")
     ap.add_argument("--results-dir", default="results")
+    ap.add_argument("--figure", default=None, help="also draw accuracy against speed into this PNG")
+    ap.add_argument("--figure-only", action="store_true", help="only draw --figure from the existing artifact")
+    ap.add_argument("--note", default="one register process (--workers 1) on the 2-core CPU",
+                    help="how the runs were made (the artifact's notes)")
     a = ap.parse_args()
+    if a.figure_only:
+        if not a.figure:
+            ap.error("--figure-only needs --figure")
+        draw(Path(a.results_dir) / "verify_ycbv_sample.json", a.figure)
+        return
     runs = Path(a.runs)
     rows, per_obj, inputs = [], {}, []
     for label, on, stem in RUNS:
@@ -50,6 +61,7 @@ def main() -> None:
             s = json.loads((ev / "summary.json").read_text())
             row[col] = f"{s['n_correct']}/{s['n_gt']} ({s['accuracy']:.2f} %)"
             if part == "all":
+                row["accuracy"] = round(s["accuracy"], 2)
                 row["inst_per_s"] = round(s["instances_per_s"], 2)
             else:
                 with open(ev / "add_s_per_object.csv") as fh:
@@ -62,14 +74,36 @@ def main() -> None:
                         d[f"{label} {'on' if on else 'off'}"] = f"{r['n_correct']}/{r['n_gt']}"
         rows.append(row)
         inputs.append(str(runs / f"{stem}.csv"))
-    note = ("one register process under nice -n 15 on the 2-core CPU shared with a training job; the load "
-            "changed between runs (the Super4PCS off run had the heaviest)")
-    write_result("verify_ycbv_sample", rows, units={"inst_per_s": "instances/s"}, results_dir=a.results_dir,
+    write_result("verify_ycbv_sample", rows, units={"inst_per_s": "instances/s", "accuracy": "%"},
+                 results_dir=a.results_dir, notes=a.note,
                  description="register --icp [--verify] on ycbv_sample train_real, GT masks, min-px 0, BOP "
-                             "symmetric ids 1,13,14,16,18-21: correct/GT per scene", inputs=inputs, notes=note)
+                             "symmetric ids 1,13,14,16,18-21: correct/GT per scene", inputs=inputs)
     write_result("verify_ycbv_sample_per_object", [per_obj[k] for k in sorted(per_obj)],
                  results_dir=a.results_dir, inputs=inputs,
                  description="register --icp [--verify] on ycbv_sample train_real: correct/GT per scene and object")
+    if a.figure:
+        draw(Path(a.results_dir) / "verify_ycbv_sample.json", a.figure)
+
+
+def draw(result: Path, png: str) -> None:
+    """Draw :func:`sixdpose.reporting.charts.plot_speed_accuracy` of the artifact ``result`` into ``png``."""
+    from sixdpose.artifacts.results import read_result
+    from sixdpose.reporting.charts import plot_speed_accuracy, save
+
+    r = read_result(result)
+    rows = [dict(row, accuracy=row.get("accuracy", _pct(row.get("both scenes", "")))) for row in r.rows]
+    fig = plot_speed_accuracy(rows, title="register --icp [--verify] on the YCB-Video sample (GT masks, 140 instances)")
+    if fig is None:
+        raise SystemExit(f"{result}: no row with both an accuracy and inst_per_s")
+    print(save(fig, png))
+
+
+def _pct(cell: str) -> float | None:
+    """The percentage of a ``"n/N (p %)"`` cell, or None."""
+    try:
+        return float(cell.split("(")[1].split("%")[0])
+    except (IndexError, ValueError):
+        return None
 
 
 if __name__ == "__main__":

@@ -33,7 +33,7 @@ LMO_TRAIN_SPLIT ?= train_pbr
 ALL_HYBRID  := ransac ransac_icp fgr fgr_icp super4pcs super4pcs_icp
 # the paper's Table III hybrid rows rerun with its own settings (registration preset `paper`, section IV-B)
 PAPER_HYBRID := ransac_icp_paper fgr_icp_paper super4pcs_paper
-ALL_LEARNED := learned_it0 learned_it2 learned_it2_icp learned_it2_colour
+ALL_LEARNED := learned_it0 learned_it2 learned_it2_icp learned_it2_colour dense dense_icp
 FEW_METHODS := ransac_icp super4pcs learned_it0 learned_it2
 HYBRID  := $(if $(filter few,$(P_METHODS)),$(filter $(FEW_METHODS),$(ALL_HYBRID)),$(ALL_HYBRID))
 LEARNED := $(if $(filter few,$(P_METHODS)),$(filter $(FEW_METHODS),$(ALL_LEARNED)),$(ALL_LEARNED))
@@ -89,6 +89,12 @@ $(RUNS)/refiner/model.pt: $(RUNS)/pose/model.pt $(TRAIN_DIR)/manifest.json $(if 
 	$(SIXDPOSE) train-refiner --pose $(RUNS)/pose --data $(TRAIN_DIR) --out $(@D) $(_val) --no-progress \
 	  $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_POSE))
 
+# the dense head (the project's own method, rows `dense` and `dense_icp`) on the same training data, with the
+# recipe of DENSE_$(PROFILE) (that of the synthetic-to-real dense head); no per-epoch validation
+$(RUNS)/pose_dense/model.pt: $(TRAIN_DIR)/manifest.json | $(VENV_OK)
+	$(SIXDPOSE) train-pose --data $(TRAIN_DIR) --out $(@D) --no-progress \
+	  $(if $(wildcard $(@D)/last.pt),--resume,$(DENSE_$(PROFILE)))
+
 # the ablation of notebook 05 (each option of the paper's architecture changed alone, the budget of
 # ABLATION_$(PROFILE)), scored on the validation split (smoke, demo: the test split's images)
 ABLATION_VAL := $(or $(VAL_DIR),$(DATA_test))
@@ -118,6 +124,9 @@ CMD_learned_it2_icp    := $(CMD_learned_it2) --icp
 CMD_learned_it2_colour := $(CMD_learned_it2) --colour-verify
 NEEDS_learned_it0  := $(RUNS)/pose/model.pt
 $(foreach m,learned_it2 learned_it2_icp learned_it2_colour,$(eval NEEDS_$(m) := $(RUNS)/pose/model.pt $(RUNS)/refiner/model.pt))
+CMD_dense          := predict-pose --pose $(RUNS)/pose_dense
+CMD_dense_icp      := $(CMD_dense) --icp
+$(foreach m,dense dense_icp,$(eval NEEDS_$(m) := $(RUNS)/pose_dense/model.pt))
 # mask arguments: GT masks count instances with >= 400 visible px (as evaluate does); predicted masks
 # keep detections scoring >= 0.5
 ARGS_register_gt     := --masks gt --min-px 400 --workers $(WORKERS)
@@ -148,7 +157,7 @@ KINECT_RESULTS := $(foreach m,$(KINECT_METHODS),$(RES)/test_kinect_gt_$(m).json)
 
 # the stages in the order of the plan (`make -n reproduce` lists them so)
 STAGES = $(IMAGENET_WEIGHTS) $(foreach g,$(DATASETS),data/$(g)/manifest.json) $(DATA_test_kinect)/manifest.json \
-	$(RUNS)/seg/model.pt $(RUNS)/pose/model.pt $(RUNS)/refiner/model.pt $(RUNS)/masks/test/meta.json $(RUNS)/masks/single/meta.json \
+	$(RUNS)/seg/model.pt $(RUNS)/pose/model.pt $(RUNS)/refiner/model.pt $(RUNS)/pose_dense/model.pt $(RUNS)/masks/test/meta.json $(RUNS)/masks/single/meta.json \
 	$(RUNS)/seg/pred_test/meta.json $(YCBV_STAGES)
 # results of record: every split x masks x method, the kinect rows and the ablation
 RESULTS := $(foreach s,$(SPLITS),$(foreach k,$(MASKS),$(foreach m,$(METHODS),$(RES)/$(s)_$(k)_$(m).json))) \
@@ -327,14 +336,16 @@ $(EXEC)/04_hybrid_registration.ipynb: notebooks/04_hybrid_registration.ipynb $(T
 	$(call papermill,$<,-p PROFILE $(P_TRAIN_GEN) -p DATA ../$(TRAIN_DIR) -p PRED_DIR ../$(RUNS)/seg/pred_test \
 	  -p MAX_IMAGES $(P_NB04) -p WORKERS $(WORKERS) $(NB_FIG))
 
-$(EXEC)/05_train_pose_network.ipynb: notebooks/05_train_pose_network.ipynb $(RUNS)/pose/model.pt $(DATA_test)/manifest.json \
-	$(ABLATION_RESULT) $(ABLATION_SEEDS_RESULT) | $(VENV_OK)
+$(EXEC)/05_train_pose_network.ipynb: notebooks/05_train_pose_network.ipynb $(RUNS)/pose/model.pt $(RUNS)/pose_dense/model.pt \
+	$(DATA_test)/manifest.json $(ABLATION_RESULT) $(ABLATION_SEEDS_RESULT) | $(VENV_OK)
 	$(call papermill,$<,-p PROFILE $(PROFILE) -p DATA ../$(TRAIN_DIR) -p TEST_DATA ../$(DATA_test) -p RUN_DIR ../$(RUNS)/pose \
+	  -p DENSE_RUN ../$(RUNS)/pose_dense \
 	  -p POSE_PROFILE $(P_POSE) -p RESULTS ../$(RES) $(NB_FIG))
 
-$(EXEC)/06_train_refiner.ipynb: notebooks/06_train_refiner.ipynb $(RUNS)/refiner/model.pt $(DATA_test)/manifest.json | $(VENV_OK)
+$(EXEC)/06_train_refiner.ipynb: notebooks/06_train_refiner.ipynb $(RUNS)/refiner/model.pt $(RUNS)/pose_dense/model.pt \
+	$(DATA_test)/manifest.json | $(VENV_OK)
 	$(call papermill,$<,-p PROFILE $(PROFILE) -p DATA ../$(TRAIN_DIR) -p TEST_DATA ../$(DATA_test) -p POSE_RUN ../$(RUNS)/pose \
-	  -p RUN_DIR ../$(RUNS)/refiner -p REFINER_PROFILE $(P_POSE) $(NB_FIG))
+	  -p RUN_DIR ../$(RUNS)/refiner -p DENSE_RUN ../$(RUNS)/pose_dense -p REFINER_PROFILE $(P_POSE) $(NB_FIG))
 
 # notebook 08: the hybrid methods on the real frames of YCBV_REAL, and the sensor-noise rows (results/P/
 # test_gt_<m> beside test_kinect_gt_<m>)
@@ -375,14 +386,21 @@ LATEXMK := latexmk
 HAVE_LATEX := $(if $(WITH_LATEX),yes,$(shell command -v $(LATEXMK) >/dev/null 2>&1 && command -v pdflatex >/dev/null 2>&1 && echo yes))
 # a figure of the write-up that is not in figures/P/ (drawn from a dataset that is not here) is a placeholder
 # in the PDF saying what makes it (sixdpose.reporting.writeup, in paper/build/P/missing/)
-$(PDF_DIR)/paper.pdf paper/paper.pdf &: $(PAPER_SRC) $(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT) $(WRITEUP_NB02) \
-	$(WRITEUP_FIGS) | $(VENV_OK)
+# The PDF's dates (CreationDate, ModDate, /ID) are fixed (SOURCE_DATE_EPOCH; the write-up's own date is the
+# results' dates, \val{dates}), so the same inputs give the same bytes: PROFILE=cpu also writes the committed
+# copy paper/sixdpose-cpu.pdf, which `make paper PROFILE=cpu` on a fresh clone rewrites unchanged.
+PDF_EPOCH := 1764547200
+PDF_COPY := $(if $(filter cpu,$(PROFILE)),paper/sixdpose-cpu.pdf)
+$(PDF_DIR)/paper.pdf paper/paper.pdf $(PDF_COPY) &: $(PAPER_SRC) $(EXEC)/07_evaluation.ipynb $(TEX_OUT) $(FIG_OUT) \
+	$(WRITEUP_NB02) $(WRITEUP_FIGS) | $(VENV_OK)
 	@mkdir -p $(PDF_DIR)
 	$(PY) -m sixdpose.reporting.writeup --profile $(PROFILE) --figures $(FIG) --out $(PDF_DIR)/missing
-	cd paper && TEXINPUTS=generated/$(PROFILE)//:../$(FIG)//:build/$(PROFILE)/missing//: $(LATEXMK) -pdf -interaction=nonstopmode -halt-on-error \
+	cd paper && SOURCE_DATE_EPOCH=$(PDF_EPOCH) TEXINPUTS=generated/$(PROFILE)//:../$(FIG)//:build/$(PROFILE)/missing//: \
+	  $(LATEXMK) -pdf -interaction=nonstopmode -halt-on-error \
 	  -quiet -outdir=build/$(PROFILE) paper.tex >build/$(PROFILE)/latexmk.log 2>&1 \
 	  || { tail -40 build/$(PROFILE)/latexmk.log; exit 1; }
 	@touch $(PDF_DIR)/paper.pdf  # latexmk leaves the PDF alone when its inputs' contents did not change
 	cp $(PDF_DIR)/paper.pdf paper/.paper.pdf.tmp && mv paper/.paper.pdf.tmp paper/paper.pdf
+	$(if $(PDF_COPY),cmp -s $(PDF_DIR)/paper.pdf $(PDF_COPY) || { cp $(PDF_DIR)/paper.pdf paper/.copy.pdf.tmp && mv paper/.copy.pdf.tmp $(PDF_COPY); })
 
 PDF := $(if $(HAVE_LATEX),$(PDF_DIR)/paper.pdf)

@@ -59,8 +59,15 @@ if PRED_DIR and Path(PRED_DIR).is_dir():
         mask_sources["pred"] = (PRED_DIR, pred_idx)
 {k: (v[0], len(v[1])) for k, v in mask_sources.items()}
 
+# %% [markdown]
+# The six methods of the paper's tables, then the best of them (Super4PCS + ICP) with the hypothesis
+# verification stage (`register --verify`, new, not in the paper: several hypotheses per instance, each
+# rendered and scored against the frame's depth, mask and texture; `sixdpose.registration.hypotheses`).
+
 # %%
-table, runs = compare_methods(ds, hybrid_methods(get_preset(PRESET), workers=WORKERS), mask_sources)
+methods = hybrid_methods(get_preset(PRESET), workers=WORKERS)
+methods.update(hybrid_methods(get_preset(PRESET), workers=WORKERS, methods=("super4pcs",), icp=(True,), verify=(True,)))
+table, runs = compare_methods(ds, methods, mask_sources)
 table  # noqa: B018 (the cell's displayed value)
 
 # %%

@@ -54,6 +54,9 @@ figures.mkdir(parents=True, exist_ok=True)
 real = open_dataset(BOP_DATA, split=BOP_SPLIT, symmetric_ids=SYMMETRIC_IDS)
 every_symmetric = open_dataset(BOP_DATA, split=BOP_SPLIT, symmetric_ids=list(real.object_ids))
 methods = hybrid_methods(workers=WORKERS, icp=(True,))
+# the best of them with the hypothesis verification stage (`register --verify`: render, compare depth, mask and
+# texture, keep the best; the colour step's successor)
+methods.update(hybrid_methods(workers=WORKERS, methods=("super4pcs",), icp=(True,), verify=(True,)))
 table, runs = compare_methods(real, methods, {"gt": ("gt", list(range(len(real)))[:MAX_IMAGES])}, min_px=0, bop=True,
                               also=[("ADD-S (all)", every_symmetric)])
 write_table(table, ["method", "add_s", "ADD-S (all)", "ar", "adds_auc", "instances_per_s"], figures / "real_ycbv.csv",

@@ -66,6 +66,10 @@ METHODS: tuple[Method, ...] = (
            "predict-pose --pose {runs}/pose --refiner {runs}/refiner --iterations 2 --icp"),
     Method("learned_it2_colour", "learned + 2 it. + colour verification", "learned",
            "predict-pose --pose {runs}/pose --refiner {runs}/refiner --iterations 2 --colour-verify"),
+    # the project's own method beside the paper's: the dense head (per-point object coordinates + a robust
+    # fit), trained on the same data with mk DENSE_<profile>'s recipe (that of the synthetic-to-real dense head)
+    Method("dense", "dense head", "learned", "predict-pose --pose {runs}/pose_dense"),
+    Method("dense_icp", "dense head + ICP", "learned", "predict-pose --pose {runs}/pose_dense --icp"),
 )
 #: key -> :class:`Method`.
 METHOD: dict[str, Method] = {m.key: m for m in METHODS}

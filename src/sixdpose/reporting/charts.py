@@ -192,6 +192,45 @@ def plot_ablation(rows: list[dict], title: str = ""):
                  title or f"Ablation of the network's choices ({', '.join(steps)} training steps each)")
 
 
+def plot_speed_accuracy(rows: list[dict], title: str = "", speed_label: str = "instances per second per core"):
+    """Accuracy against speed, one marker per row and an arrow from each method's row with a switch off to
+    its row with it on (the verification benchmark: ``benchmarks/verify_ycbv_sample.py --figure``).
+
+    Args:
+        rows: dicts with ``method`` (str), ``verify`` (``"on"`` / ``"off"``), ``accuracy`` (%) and
+            ``inst_per_s`` (instances per second per core); rows without both numbers are left out.
+    Returns:
+        a matplotlib Figure, or None when no row has both numbers.
+    """
+    import matplotlib.pyplot as plt
+
+    pts = [(r["method"], r.get("verify", ""), _num(r.get("inst_per_s")), _num(r.get("accuracy"))) for r in rows]
+    pts = [p for p in pts if p[2] is not None and p[3] is not None]
+    if not pts:
+        return None
+    fig, ax = plt.subplots(figsize=(6.0, 4.0))
+    colours = {}
+    for method, on, x, y in pts:
+        c = colours.setdefault(method, f"C{len(colours)}")
+        ax.scatter([x], [y], color=c, marker="o" if on == "on" else "s", zorder=3,
+                   label=f"{method}, verification {on}")
+        ax.annotate(f"{y:.1f}", (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
+    for method in colours:
+        off = [(x, y) for m, on, x, y in pts if m == method and on == "off"]
+        on_ = [(x, y) for m, on, x, y in pts if m == method and on == "on"]
+        if off and on_:
+            ax.annotate("", xy=on_[0], xytext=off[0], arrowprops={"arrowstyle": "->", "color": colours[method]})
+    ax.set_xscale("log")
+    ax.set_xlabel(f"{speed_label} (log scale)", fontsize=8)
+    ax.set_ylabel("ADD(-S) accuracy (%)", fontsize=8)
+    ax.tick_params(labelsize=7)
+    ax.grid(alpha=0.3)
+    ax.set_title(title or "Hypothesis verification: accuracy against speed", fontsize=9)
+    ax.legend(fontsize=6, loc="lower left")
+    fig.tight_layout()
+    return fig
+
+
 def write_charts(entries: dict, results_dir: str | Path, profile: str, figures: str | Path) -> tuple[list[str], dict]:
     """Draw every chart of the results into ``figures``: ``table3.png``, ``table2_fps.png``,
     ``per_object_<split>_<masks>.png`` (each split and mask source with results), ``real_frames.png``,

@@ -30,24 +30,32 @@ class Run:
 
 
 def hybrid_methods(
-    cfg=None, workers: int = 2, methods=tuple(HYBRID_ALGORITHMS), icp=(False, True)
+    cfg=None, workers: int = 2, methods=tuple(HYBRID_ALGORITHMS), icp=(False, True), verify=(False,)
 ) -> dict[str, Callable]:
     """The hybrid methods as ``{display name: run(reader, masks, indices)}``.
 
     Args:
         cfg: a :class:`~sixdpose.registration.presets.RegistrationConfig` (default preset if None).
-        workers: registration processes. methods, icp: which combinations.
+        workers: registration processes. methods, icp, verify: which combinations (``verify``: the
+            hypothesis verification stage, ``register --verify``; its rows are named "+ verification").
     """
+    from ..registration.presets import get_preset
     from ..registration.runner import run_registration
 
+    base = cfg if cfg is not None else get_preset("default")
     out = {}
     for m in methods:
         for use_icp in icp:
-            def run(reader, masks, indices, m=m, use_icp=use_icp):
-                return run_registration(reader, m, icp=use_icp, masks=masks, cfg=cfg, workers=workers, indices=indices,
-                                        min_px=MIN_VISIBLE_PX if masks == "gt" else 0, progress=False)
+            for use_verify in verify:
+                c = base.replace(verify=True) if use_verify else base
 
-            out[f"Hybrid ({HYBRID_ALGORITHMS[m]}{' + ICP' if use_icp else ''})"] = run
+                def run(reader, masks, indices, m=m, use_icp=use_icp, c=c):
+                    return run_registration(reader, m, icp=use_icp, masks=masks, cfg=c, workers=workers,
+                                            indices=indices, min_px=MIN_VISIBLE_PX if masks == "gt" else 0,
+                                            progress=False)
+
+                name = HYBRID_ALGORITHMS[m] + (" + ICP" if use_icp else "") + (" + verification" if use_verify else "")
+                out[f"Hybrid ({name})"] = run
     return out
 
 

@@ -126,20 +126,27 @@ class Source:
 _T3 = TABLES["III"]
 
 #: Learned-pose evaluations of the ``cpu`` runs on ``data/test``: (label, masks, result, method key of
-#: :data:`sixdpose.registry.METHODS` for the paper column).
+#: :data:`sixdpose.registry.METHODS` for the paper column). The dense head's rows (the project's own
+#: method) are shown where their result files exist.
 LEARNED_CPU = [
     ("learned, 0 refinement it.", "GT", "cpu/test_gt_learned_it0", "learned_it0"),
     ("learned + 2 refinement it.", "GT", "cpu/test_gt_learned_it2", "learned_it2"),
     ("learned + 2 it. + ICP", "GT", "cpu/test_gt_learned_it2_icp", None),
     ("learned + 2 it. + colour verification", "GT", "cpu/test_gt_learned_it2_colour", None),
+    ("dense head (ours)", "GT", "cpu/test_gt_dense", None),
+    ("dense head + ICP (ours)", "GT", "cpu/test_gt_dense_icp", None),
     ("learned, 0 it.", "predicted (Mask R-CNN `cpu`)", "cpu/test_pred_learned_it0", None),
     ("learned + 2 it.", "predicted (Mask R-CNN `cpu`)", "cpu/test_pred_learned_it2", None),
 ]
+#: The rows of :data:`LEARNED_CPU` shown only where their result exists.
+_OPTIONAL_LEARNED_CPU = ("cpu/test_gt_dense", "cpu/test_gt_dense_icp")
 
 
 def _learned_cpu_summary(src: Source) -> str:
     rows = []
     for label, masks, name, paper in LEARNED_CPU:
+        if name in _OPTIONAL_LEARNED_CPU and not src.exists(name):
+            continue
         f = src(name).figures
         rows.append([label, fmt(paper_figure("III", paper)) if paper else "", masks,
                      f"{fmt(f['accuracy'])} ({f['n_correct']}/{f['n_gt']})", f["mean_object_accuracy"],
@@ -157,6 +164,8 @@ def _learned_cpu_per_object(src: Source) -> str:
         ("+ 2 it. + ICP", "cpu/test_gt_learned_it2_icp"),
         ("+ 2 it. + colour verif.", "cpu/test_gt_learned_it2_colour"),
     ]
+    dense = (("dense head", "cpu/test_gt_dense"), ("dense head + ICP", "cpu/test_gt_dense_icp"))
+    cols += [(label, n) for label, n in dense if src.exists(n)]
     res = [src(n) for _, n in cols]
     rows = []
     for r0 in res[0].rows:
