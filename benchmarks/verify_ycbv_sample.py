@@ -14,7 +14,10 @@ artifacts ``results/verify_ycbv_sample.json`` (one row per method and switch) an
 accuracy against instances per second per core (one register process: per core) from the first artifact
 (``--figure-only``: from the committed artifact, without the runs).
 
-    python benchmarks/verify_ycbv_sample.py [--runs runs/verify] [--figure figures/verify_ycbv_sample.png]
+    python benchmarks/verify_ycbv_sample.py [--run] [--runs runs/verify] [--figure figures/verify_ycbv_sample.png]
+
+``--run`` first runs those commands (a results CSV already there is kept: delete it to measure again), so
+on an otherwise idle machine the speed column is one core's.
 """
 
 from __future__ import annotations
@@ -22,6 +25,8 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 from sixdpose.artifacts.results import write_result
@@ -37,9 +42,36 @@ RUNS = [
 ]
 
 
+#: the sample, its split and the BOP symmetric ids of YCB-Video (the sample carries no annotation)
+DATA, SPLIT, SYMMETRIC = "../shared/data/ycbv_sample", "train_real", "1,13,14,16,18,19,20,21"
+#: method label -> register --method
+ALGORITHM = {"Super4PCS + ICP": "super4pcs", "RANSAC + ICP": "ransac", "FGR + ICP": "fgr"}
+
+
+def run_all(runs: Path, data: str) -> None:
+    """Run ``register`` (one process) and the three evaluations of every entry of :data:`RUNS` whose results
+    CSV is not in ``runs`` yet."""
+    exe = [sys.executable, "-m", "sixdpose"]
+    runs.mkdir(parents=True, exist_ok=True)
+    for label, on, stem in RUNS:
+        csv_path = runs / f"{stem}.csv"
+        if not csv_path.is_file():
+            subprocess.run([*exe, "register", "--data", data, "--split", SPLIT, "--method", ALGORITHM[label], "--icp",
+                            "--masks", "gt", "--min-px", "0", "--workers", "1", "--no-progress",
+                            *(["--verify"] if on else []), "--out", str(csv_path)], check=True)
+        for part in ("all", "0", "1"):
+            subprocess.run([*exe, "evaluate", "--data", data, "--split", SPLIT, "--symmetric-ids", SYMMETRIC,
+                            "--min-px", "0", "--no-bop", "--no-progress", "--results", str(csv_path),
+                            "--out", str(runs / f"{stem}_eval_{part}"),
+                            *([] if part == "all" else ["--scenes", part])], check=True, stdout=subprocess.DEVNULL)
+        print(f"{stem}: done", flush=True)
+
+
 def main() -> None:
     """Collect the evaluations and write the two result artifacts."""
     ap = argparse.ArgumentParser()
+    ap.add_argument("--run", action="store_true", help="first run register and evaluate (missing CSVs only)")
+    ap.add_argument("--data", default=DATA, help="the BOP YCB-Video sample")
     ap.add_argument("--runs", default="runs/verify")
     ap.add_argument("--results-dir", default="results")
     ap.add_argument("--figure", default=None, help="also draw accuracy against speed into this PNG")
@@ -53,6 +85,8 @@ def main() -> None:
         draw(Path(a.results_dir) / "verify_ycbv_sample.json", a.figure)
         return
     runs = Path(a.runs)
+    if a.run:
+        run_all(runs, a.data)
     rows, per_obj, inputs = [], {}, []
     for label, on, stem in RUNS:
         row = {"method": label, "verify": "on" if on else "off"}

@@ -411,3 +411,34 @@ def test_charts_from_results_alone(results, tmp_path):
     assert (figs / "table3.png").read_bytes() == first  # the same results, the same bytes
     assert b"Matplotlib" not in first
     assert charts.plot_table3([]) is None and charts.plot_per_object([]) is None and charts.plot_real([]) is None
+
+
+def test_speed_accuracy_chart_pairs_a_methods_rows_with_and_without_verification():
+    """The verification benchmark's chart: one marker per row with both numbers, an arrow per method from
+    its row with verification off to its row with it on; nothing to draw gives None."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from sixdpose.reporting import charts
+
+    rows = [{"method": "A", "verify": "off", "accuracy": 90.0, "inst_per_s": 2.0},
+            {"method": "A", "verify": "on", "accuracy": 95.0, "inst_per_s": 1.5},
+            {"method": "B", "verify": "off", "accuracy": 80.0, "inst_per_s": 9.0},
+            {"method": "C", "verify": "on", "accuracy": None, "inst_per_s": 3.0}]  # no accuracy: left out
+    fig = charts.plot_speed_accuracy(rows)
+    ax = fig.axes[0]
+    assert len(ax.collections) == 3  # A off, A on, B off
+    arrows = [t for t in ax.texts if getattr(t, "arrow_patch", None) is not None]
+    assert len(arrows) == 1 and tuple(arrows[0].xy) == (1.5, 95.0)  # A: off -> on
+    assert charts.plot_speed_accuracy(rows[3:]) is None and charts.plot_speed_accuracy([]) is None
+
+
+def test_hybrid_methods_name_the_verification_rows():
+    """compare.hybrid_methods(verify=(False, True)) gives each combination its own row name."""
+    from sixdpose.reporting.compare import hybrid_methods
+
+    methods = hybrid_methods(methods=("super4pcs",), icp=(True,), verify=(False, True))
+    assert list(methods) == ["Hybrid (Super4PCS + ICP)", "Hybrid (Super4PCS + ICP + verification)"]
+    # each run is bound to its configuration (the last default of the closure): verify on in the second only
+    assert [run.__defaults__[-1].verify for run in methods.values()] == [False, True]
+    assert list(hybrid_methods(methods=("ransac",), icp=(False,))) == ["Hybrid (RANSAC)"]
