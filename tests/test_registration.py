@@ -304,3 +304,25 @@ def test_real_depth_ycbv_every_method(tmp_path):
                 ok += adds(est.X_CO[:3, :3], est.X_CO[:3, 3], inst.R, inst.t, m.points) < 0.1 * m.diameter
                 n += 1
         assert ok >= n - 2, (method, ok, n)
+
+
+@needs_ycbv
+def test_verify_retries_a_poorly_fitting_pose_and_keeps_the_best():
+    """With ``--verify``, an instance whose verified score stays below ``verify_retry_below`` is registered
+    again with the global method reseeded (at most ``verify_retries`` times); the best verified pose is
+    kept, so the score never drops; ``verify_retry_below=0`` never retries."""
+    from sixdpose.registration.hypotheses import Frame
+
+    ds = open_dataset(YCBV, split="train_real")
+    s = ds[0]
+    inst = s.instances[0]
+    pts, _, _ = backproject(s.depth, s.K, inst.mask)
+    frame = Frame(s.depth, s.K, inst.mask, s.rgb)
+    cache = ReferenceCache(ds)
+    off = estimate_pose(pts, inst.obj_id, "super4pcs", cache, get_preset("default", verify=True, verify_retry_below=0.0),
+                        icp=True, frame=frame)
+    assert "verify_retries" not in off.info
+    always = get_preset("default", verify=True, verify_retry_below=1.0, verify_retries=2)  # every score is below 1
+    on = estimate_pose(pts, inst.obj_id, "super4pcs", cache, always, icp=True, frame=frame)
+    assert on.info["verify_retries"] == 2 and on.score >= off.score - 1e-9 and on.time > 0
+    assert get_preset("default").verify_retry_below > 0  # on by default with --verify

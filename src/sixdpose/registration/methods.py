@@ -16,6 +16,7 @@ downsampling, first-use model preparation) to the instance, except disk reads (p
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -334,5 +335,21 @@ def estimate_pose(
     est = _FUNCS[method](scene, ref, cfg)
     r = refine_pose(est.X_CO, points, obj_id, cache, cfg, icp=icp, colour_verify=cfg.colour_verify, colors=colors,
                     score=est.score, scene=scene, ref=ref, frame=frame)
+    spent, retries = est.time + r.time, 0
+    # a verified pose that fits the frame poorly (score below verify_retry_below) is searched for again: the
+    # global method reseeded, up to verify_retries times, keeping the best verified pose (a global method
+    # that lands in a wrong basin, an object upside down, lands elsewhere with other random draws)
+    if cfg.verify and frame is not None and cfg.verify_retry_below > 0:
+        while r.score < cfg.verify_retry_below and retries < cfg.verify_retries:
+            retries += 1
+            cfg_k = dataclasses.replace(cfg, seed=(cfg.seed + 1_000_003 * retries) % 2**31)
+            est_k = _FUNCS[method](scene, ref, cfg_k)
+            r_k = refine_pose(est_k.X_CO, points, obj_id, cache, cfg_k, icp=icp, colour_verify=cfg.colour_verify,
+                              colors=colors, score=est_k.score, scene=scene, ref=ref, frame=frame)
+            spent += est_k.time + r_k.time
+            if r_k.score > r.score:
+                est, r = est_k, r_k
     info = dict(est.info, global_score=est.score, n_scene=len(scene.points), **r.info)
-    return Registration(r.X_CO, r.score, t_ref + scene.time + est.time + r.time, info)
+    if retries:
+        info["verify_retries"] = retries
+    return Registration(r.X_CO, r.score, t_ref + scene.time + spent, info)

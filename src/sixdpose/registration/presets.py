@@ -149,7 +149,10 @@ class RegistrationConfig(Config):
             score every turned hypothesis moved onto the observed cloud's centroid.
             verify_search_rounds, verify_search_n, verify_search_deg: local search of the best
             ``verify_icp`` hypotheses before ICP (:func:`~sixdpose.registration.hypotheses.local_search`;
-            0 rounds: none).
+            0 rounds: none). verify_retry_below, verify_retries: an instance whose verified score stays
+            below ``verify_retry_below`` (0: never) is registered again with the global method reseeded,
+            up to ``verify_retries`` times, and the best verified pose is kept
+            (:func:`~sixdpose.registration.methods.estimate_pose`).
         seed: random seed of the run (RANSAC, FGR, Super4PCS and the colour search); each instance
             uses its own seed derived from it (:func:`~sixdpose.registration.runner.instance_seed`).
     """
@@ -218,6 +221,8 @@ class RegistrationConfig(Config):
     verify_search_rounds: int = bounded(0, min=0, max=100)
     verify_search_n: int = bounded(32, min=1, max=100_000)
     verify_search_deg: float = bounded(30.0, min=0, max=180, min_open=True)
+    verify_retry_below: float = bounded(0.6, min=0, max=1)
+    verify_retries: int = bounded(2, min=0, max=100)
     seed: int = bounded(0, min=0, max=2**32 - 1)
 
     def validate(self) -> None:

@@ -221,6 +221,11 @@ def plot_speed_accuracy(rows: list[dict], title: str = "", speed_label: str = "i
         if off and on_:
             ax.annotate("", xy=on_[0], xytext=off[0], arrowprops={"arrowstyle": "->", "color": colours[method]})
     ax.set_xscale("log")
+    from matplotlib.ticker import FormatStrFormatter
+
+    for axis in (ax.xaxis,):  # plain numbers on the log axis (2, 3, 4, ... not 3 x 10^0)
+        axis.set_major_formatter(FormatStrFormatter("%g"))
+        axis.set_minor_formatter(FormatStrFormatter("%g"))
     ax.set_xlabel(f"{speed_label} (log scale)", fontsize=8)
     ax.set_ylabel("ADD(-S) accuracy (%)", fontsize=8)
     ax.tick_params(labelsize=7)
