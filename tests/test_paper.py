@@ -134,6 +134,8 @@ def test_the_write_up_builds_from_generated_files(tmp_path, lmo):
             report.write_per_object(e, s, k, fig / "p.csv", gen / f"per_object_{s}_{k}.tex")
     report.write_real_table(res, fig / "real.csv", gen / "table_real.tex")  # no results: the "not run" row
     report.write_ablation_table(res, "smoke", fig / "abl.csv", gen / "table_ablation.tex")
+    report.write_ablation_table(res, "smoke", fig / "abls.csv", gen / "table_ablation_seeds.tex",
+                                name="pose_ablation_seeds")  # not run: the "not run" row
     report.write_table2_e2e(res, fig / "t2e.csv", gen / "table2_e2e.tex")  # no benchmark: the "not run" row
     from sixdpose.reporting.claims import write_claims
 

@@ -319,8 +319,8 @@ def test_verify_retries_a_poorly_fitting_pose_and_keeps_the_best():
     pts, _, _ = backproject(s.depth, s.K, inst.mask)
     frame = Frame(s.depth, s.K, inst.mask, s.rgb)
     cache = ReferenceCache(ds)
-    off = estimate_pose(pts, inst.obj_id, "super4pcs", cache, get_preset("default", verify=True, verify_retry_below=0.0),
-                        icp=True, frame=frame)
+    never = get_preset("default", verify=True, verify_retry_below=0.0)
+    off = estimate_pose(pts, inst.obj_id, "super4pcs", cache, never, icp=True, frame=frame)
     assert "verify_retries" not in off.info
     always = get_preset("default", verify=True, verify_retry_below=1.0, verify_retries=2)  # every score is below 1
     on = estimate_pose(pts, inst.obj_id, "super4pcs", cache, always, icp=True, frame=frame)
