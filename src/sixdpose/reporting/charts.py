@@ -204,12 +204,15 @@ def plot_speed_accuracy(rows: list[dict], title: str = "", speed_label: str = "i
     """
     import matplotlib.pyplot as plt
 
-    pts = [(r["method"], r.get("verify", ""), _num(r.get("inst_per_s")), _num(r.get("accuracy"))) for r in rows]
-    pts = [p for p in pts if p[2] is not None and p[3] is not None]
+    pts: list[tuple[str, str, float, float]] = []
+    for r in rows:
+        x, y = _num(r.get("inst_per_s")), _num(r.get("accuracy"))
+        if x is not None and y is not None:
+            pts.append((str(r["method"]), str(r.get("verify", "")), x, y))
     if not pts:
         return None
     fig, ax = plt.subplots(figsize=(6.0, 4.0))
-    colours = {}
+    colours: dict[str, str] = {}
     for method, on, x, y in pts:
         c = colours.setdefault(method, f"C{len(colours)}")
         ax.scatter([x], [y], color=c, marker="o" if on == "on" else "s", zorder=3,
