@@ -124,20 +124,11 @@ def draw(result: Path, png: str) -> None:
     from sixdpose.artifacts.results import read_result
     from sixdpose.reporting.charts import plot_speed_accuracy, save
 
-    r = read_result(result)
-    rows = [dict(row, accuracy=row.get("accuracy", _pct(row.get("both scenes", "")))) for row in r.rows]
-    fig = plot_speed_accuracy(rows, title="register --icp [--verify] on the YCB-Video sample (GT masks, 140 instances)")
+    fig = plot_speed_accuracy(read_result(result).rows,
+                              title="register --icp [--verify] on the YCB-Video sample (GT masks, 140 instances)")
     if fig is None:
         raise SystemExit(f"{result}: no row with both an accuracy and inst_per_s")
     print(save(fig, png))
-
-
-def _pct(cell: str) -> float | None:
-    """The percentage of a ``"n/N (p %)"`` cell, or None."""
-    try:
-        return float(cell.split("(")[1].split("%")[0])
-    except (IndexError, ValueError):
-        return None
 
 
 if __name__ == "__main__":

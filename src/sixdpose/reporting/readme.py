@@ -125,6 +125,9 @@ class Source:
 # --------------------------------------------------------------------------------------------
 _T3 = TABLES["III"]
 
+#: The dense head's results on ``data/test`` (label, result): rows of :data:`LEARNED_CPU` and columns of the
+#: per-object block, shown only where their result exists.
+DENSE_CPU = (("dense head", "cpu/test_gt_dense"), ("dense head + ICP", "cpu/test_gt_dense_icp"))
 #: Learned-pose evaluations of the ``cpu`` runs on ``data/test``: (label, masks, result, method key of
 #: :data:`sixdpose.registry.METHODS` for the paper column). The dense head's rows (the project's own
 #: method) are shown where their result files exist.
@@ -133,13 +136,11 @@ LEARNED_CPU = [
     ("learned + 2 refinement it.", "GT", "cpu/test_gt_learned_it2", "learned_it2"),
     ("learned + 2 it. + ICP", "GT", "cpu/test_gt_learned_it2_icp", None),
     ("learned + 2 it. + colour verification", "GT", "cpu/test_gt_learned_it2_colour", None),
-    ("dense head (ours)", "GT", "cpu/test_gt_dense", None),
-    ("dense head + ICP (ours)", "GT", "cpu/test_gt_dense_icp", None),
+    *((f"{label} (ours)", "GT", name, None) for label, name in DENSE_CPU),
     ("learned, 0 it.", "predicted (Mask R-CNN `cpu`)", "cpu/test_pred_learned_it0", None),
     ("learned + 2 it.", "predicted (Mask R-CNN `cpu`)", "cpu/test_pred_learned_it2", None),
 ]
-#: The rows of :data:`LEARNED_CPU` shown only where their result exists.
-_OPTIONAL_LEARNED_CPU = ("cpu/test_gt_dense", "cpu/test_gt_dense_icp")
+_OPTIONAL_LEARNED_CPU = tuple(name for _, name in DENSE_CPU)
 
 
 def _learned_cpu_summary(src: Source) -> str:
@@ -164,8 +165,7 @@ def _learned_cpu_per_object(src: Source) -> str:
         ("+ 2 it. + ICP", "cpu/test_gt_learned_it2_icp"),
         ("+ 2 it. + colour verif.", "cpu/test_gt_learned_it2_colour"),
     ]
-    dense = (("dense head", "cpu/test_gt_dense"), ("dense head + ICP", "cpu/test_gt_dense_icp"))
-    cols += [(label, n) for label, n in dense if src.exists(n)]
+    cols += [(label, n) for label, n in DENSE_CPU if src.exists(n)]
     res = [src(n) for _, n in cols]
     rows = []
     for r0 in res[0].rows:
