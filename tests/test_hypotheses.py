@@ -202,3 +202,55 @@ def test_local_search_moves_toward_the_true_pose():
     Xb, sb = H.local_search(off[None], s0, surface(), frame, cfg)
     assert sb[0] > s0[0]
     assert rotation_error(Xb[0, :3, :3], R_TRUE) < 10.0 < rotation_error(off[:3, :3], R_TRUE)
+
+
+def test_near_symmetries_of_a_box_are_its_three_half_turns():
+    # geometry alone (no colours): a box maps onto itself by the half-turns about its three axes
+    sym = H.near_symmetries(surface(coloured=False))
+    assert len(sym) == 3
+    from scipy.spatial.transform import Rotation
+
+    rv = Rotation.from_matrix(sym[:, :3, :3]).as_rotvec()
+    assert np.allclose(np.linalg.norm(rv, axis=1), np.pi, atol=0.05)
+    axes = np.abs(rv / np.linalg.norm(rv, axis=1, keepdims=True))
+    assert sorted(int(np.argmax(a)) for a in axes) == [0, 1, 2] and (axes.max(axis=1) > 0.99).all()
+    assert np.abs(sym[:, :3, 3]).max() < 2e-3  # about the box centre
+    # cached on the surface: the same array again
+    s = surface(coloured=False)
+    assert H.near_symmetries(s) is H.near_symmetries(s)
+
+
+def test_verification_with_near_symmetries_undoes_a_flip_without_principal_turns():
+    import dataclasses
+
+    X_true = X(R_TRUE)
+    flip = X_true @ X(rot(2, 180), (0, 0, 0))
+    frame = render(X_true)
+    cfg = dataclasses.replace(CFG, verify_turns=0, verify_near_symmetries=6)
+    v = H.verify_hypotheses(flip, surface(), frame, cfg, obj_id=1)
+    assert v.n_hypotheses == 1 + 3
+    assert np.allclose(v.X_CO[:3, :3], R_TRUE, atol=1e-2) and np.allclose(v.X_CO[:3, 3], X_true[:3, 3], atol=3e-3)
+    # off (and no turns): the flipped input pose is all there is
+    v0 = H.verify_hypotheses(flip, surface(), frame, dataclasses.replace(cfg, verify_near_symmetries=0), obj_id=1)
+    assert v0.n_hypotheses == 1 and np.allclose(v0.X_CO, flip)
+
+
+def test_grey_detail_tells_a_flip_of_black_print_on_white_apart(monkeypatch):
+    import dataclasses
+
+    def print_on_white(p: np.ndarray) -> np.ndarray:
+        # black stripes printed on the +x half of a white box (edges off the sample grid)
+        ink = (p[:, 0] > 0) & ((np.floor((p[:, 1] + 0.0031) / 0.0125) % 2) == 0)
+        return np.repeat(np.where(ink, 0.1, 0.9)[:, None], 3, axis=1)
+
+    monkeypatch.setitem(globals(), "colours_of", print_on_white)
+    X_true = X(R_TRUE)
+    flip = X_true @ X(rot(2, 180), (0, 0, 0))
+    frame = render(X_true, lighting=(0.8, 0.05))
+    surf = surface()
+    cfg = dataclasses.replace(CFG, verify_detail_share=1.0)  # the texture term is the grey detail alone
+    det = H.score_hypotheses(np.stack([X_true, flip]), surf, frame, cfg)
+    assert det.texture[0] > 0.4 and det.texture[1] < 0.1
+    # where the model has no colours there is no detail either: geometry alone, as before
+    bare = H.score_hypotheses(np.stack([X_true, flip]), surface(coloured=False), frame, cfg)
+    assert not bare.textured and (bare.texture == 0).all()

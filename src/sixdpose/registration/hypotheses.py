@@ -62,6 +62,34 @@ class Frame:
     mask: np.ndarray
     rgb: np.ndarray | None = None
 
+    def __post_init__(self):
+        self._detail: dict = {}
+
+    def detail(self, radius_px: float) -> np.ndarray:
+        """(H, W) float32 grey detail inside the mask: the grey value minus its mean over the mask's
+        pixels within about ``radius_px`` (a normalised box filter, so neither the background nor the
+        slow shading across the object counts); 0 outside the mask's box. Cached per radius."""
+        r = max(1, int(round(radius_px)))
+        if r in self._detail:
+            return self._detail[r]
+        from scipy.ndimage import uniform_filter
+
+        out = np.zeros(self.mask.shape, np.float32)
+        vv, uu = np.nonzero(self.mask)
+        if self.rgb is not None and len(vv):
+            H, W = self.mask.shape
+            v0, v1 = max(vv.min() - 2 * r, 0), min(vv.max() + 2 * r + 1, H)
+            u0, u1 = max(uu.min() - 2 * r, 0), min(uu.max() + 2 * r + 1, W)
+            rgb = np.asarray(self.rgb[v0:v1, u0:u1], dtype=np.float64)
+            if self.rgb.dtype == np.uint8:
+                rgb = rgb / 255.0
+            m = self.mask[v0:v1, u0:u1].astype(np.float64)
+            g = grey_of(rgb)
+            mean = uniform_filter(g * m, 2 * r + 1) / np.maximum(uniform_filter(m, 2 * r + 1), 1e-6)
+            out[v0:v1, u0:u1] = np.where(m > 0, g - mean, 0.0)
+        self._detail[r] = out
+        return out
+
 
 @dataclass
 class Surface:
@@ -71,7 +99,8 @@ class Surface:
         points, normals: (M, 3) uniform surface samples with outward unit normals. spacing: their
         spacing (m). grey, chroma: (M,) grey values and (M, 3) chromaticities of the model's colours
         at the samples, or None for a model without colours. axes: (3, 3) principal axes (columns).
-        centroid: (3,). diameter: metres.
+        centroid: (3,). diameter: metres. detail: (M,) grey minus its mean over the samples within
+        ``detail_radius`` (m) on the surface (the printing, not the albedo's slow changes), or None.
     """
 
     points: np.ndarray
@@ -82,6 +111,8 @@ class Surface:
     axes: np.ndarray
     centroid: np.ndarray
     diameter: float
+    detail: np.ndarray | None = None
+    detail_radius: float = 0.0
 
     def __post_init__(self):
         self._f32: dict = {}
@@ -99,22 +130,28 @@ def grey_of(rgb: np.ndarray) -> np.ndarray:
 
 
 def build_surface(points: np.ndarray, normals: np.ndarray, spacing: float, diameter: float,
-                  model_points: np.ndarray | None = None, model_colors: np.ndarray | None = None) -> Surface:
+                  model_points: np.ndarray | None = None, model_colors: np.ndarray | None = None,
+                  detail_rel: float = 0.05) -> Surface:
     """A :class:`Surface` from (M, 3) samples and normals (object frame, m) at ``spacing`` metres; the
-    colours (N, 3 in [0, 1]) of the model points ``model_points`` (N, 3) are read at the nearest one."""
+    colours (N, 3 in [0, 1]) of the model points ``model_points`` (N, 3) are read at the nearest one;
+    the grey detail is taken over ``detail_rel`` x ``diameter``."""
     from .verify import chroma
 
-    grey = ch = None
+    grey = ch = det = None
+    radius = detail_rel * diameter
     if model_colors is not None and model_points is not None and len(model_colors) == len(model_points):
         from scipy.spatial import cKDTree
 
         _, idx = cKDTree(model_points).query(points, k=1)
         col = np.asarray(model_colors, dtype=np.float64)[idx]
         grey, ch = grey_of(col), chroma(col)
+        if radius > 0:
+            nb = cKDTree(points).query_ball_point(points, radius)
+            det = grey - np.array([grey[ix].mean() for ix in nb])
     c = points.mean(axis=0)
     _, vecs = np.linalg.eigh(np.cov((points - c).T))
     return Surface(np.asarray(points, np.float64), np.asarray(normals, np.float64), float(spacing), grey, ch,
-                   vecs[:, ::-1].copy(), c, float(diameter))
+                   vecs[:, ::-1].copy(), c, float(diameter), det, float(radius))
 
 
 def model_surface(cache: ReferenceCache, obj_id: int, cfg: RegistrationConfig) -> tuple[Surface, float]:
@@ -122,7 +159,7 @@ def model_surface(cache: ReferenceCache, obj_id: int, cfg: RegistrationConfig) -
     the diameter, with the model's colours); returns ``(surface, seconds spent building it now)``."""
     import time
 
-    key = ("surface", int(obj_id), float(cfg.verify_voxel_rel))
+    key = ("surface", int(obj_id), float(cfg.verify_voxel_rel), float(cfg.verify_detail_rel))
     hit = cache.extra.get(key)
     if isinstance(hit, Surface):
         return hit, 0.0
@@ -130,7 +167,8 @@ def model_surface(cache: ReferenceCache, obj_id: int, cfg: RegistrationConfig) -
     model = cache.dataset.model(obj_id)
     spacing = cfg.verify_voxel_rel * model.diameter
     ref, _ = cache.get(obj_id, spacing, None)
-    surf = build_surface(ref.points, ref.normals, spacing, model.diameter, model.points, model.colors)
+    surf = build_surface(ref.points, ref.normals, spacing, model.diameter, model.points, model.colors,
+                         cfg.verify_detail_rel)
     cache.extra[key] = surf
     return surf, time.perf_counter() - t0
 
@@ -149,6 +187,129 @@ def turns(surface: Surface, n_turns: int) -> np.ndarray:
     return np.stack(out)
 
 
+def _kabsch(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rigid motion ``(R, t)`` minimising ``|R A + t - B|`` over paired (N, 3) points."""
+    ca, cb = A.mean(axis=0), B.mean(axis=0)
+    U, _, Vt = np.linalg.svd((A - ca).T @ (B - cb))
+    D = np.diag([1.0, 1.0, float(np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0)])
+    R = Vt.T @ D @ U.T
+    return R, cb - R @ ca
+
+
+def _half_turn_axes(n: int) -> np.ndarray:
+    """``n`` unit axes spread evenly over a hemisphere (a Fibonacci lattice; a half-turn about ``a`` is
+    the half-turn about ``-a``)."""
+    i = np.arange(n) + 0.5
+    z = 1.0 - i / n
+    r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+    phi = math.pi * (1.0 + math.sqrt(5.0)) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+def near_symmetries(surface: Surface, n_axes: int = 150, keep: int = 6, min_fit: float = 0.7,
+                    n_points: int = 300, iterations: int = 6, seed: int = 0) -> np.ndarray:
+    """The model's near-symmetries: rigid motions ``X_ON`` (K, 4, 4) of the object frame, other than
+    the identity, that map the model's surface onto itself, the flips that the masked cloud cannot
+    tell apart from the true pose (a box's half-turns, a screwdriver about its shaft, a pitcher about
+    its body with the handle the only difference, a ball's seams).
+
+    A half-turn about each of ``n_axes`` axes through the centroid is refined by ICP of ``n_points``
+    surface samples onto the surface (``iterations`` point-to-plane steps). A motion is a
+    near-symmetry when at least ``min_fit`` of the samples land within 2 % of the diameter of the
+    surface; the kept ones (``keep`` at most, 20 degrees apart and from the identity) are ordered by
+    that fraction. Where the geometry alone keeps more than ``keep`` of them (a ball, a can: the shape
+    maps onto itself in many ways) and the model has colours, they are refined again matching points
+    on position and chromaticity together and ordered by the correlation of the chromaticities the
+    samples land on, so the turns the texture also keeps (a ball's seams) come first. Cached on
+    ``surface`` (about 1 s per object). Not in the paper.
+    """
+    key = ("near_symmetries", n_axes, keep, min_fit, n_points, iterations, seed)
+    hit = surface._f32.get(key)
+    if hit is not None:
+        return hit
+    from scipy.spatial import cKDTree
+    from scipy.spatial.transform import Rotation
+
+    P, C = surface.points, surface.chroma
+    rng = np.random.default_rng(seed)
+    sub = rng.choice(len(P), min(n_points, len(P)), replace=False)
+    Ps = P[sub]
+    tree = cKDTree(P)
+    tol = 0.02 * surface.diameter
+
+    Nrm = surface.normals
+
+    def icp(R: np.ndarray, t: np.ndarray, query, plane: bool) -> tuple[np.ndarray, np.ndarray]:
+        for _ in range(iterations):
+            Q = Ps @ R.T + t
+            d, j = query(Q)
+            inl = d < 3 * tol
+            if inl.sum() < 10:
+                break
+            if plane:  # point-to-plane, linearised (slides along a box's faces in a step or two)
+                q, p, n = Q[inl], P[j[inl]], Nrm[j[inl]]
+                A = np.hstack([np.cross(q, n), n])
+                x = np.linalg.solve(A.T @ A + 1e-9 * np.eye(6), A.T @ ((p - q) * n).sum(axis=1))
+                dR = Rotation.from_rotvec(x[:3]).as_matrix()
+                dt = x[3:]
+            else:
+                dR, dt = _kabsch(Q[inl], P[j[inl]])
+            R, t = dR @ R, dR @ t + dt
+        return R, t
+
+    def fit_of(R: np.ndarray, t: np.ndarray) -> tuple[float, float]:
+        d, j = tree.query(Ps @ R.T + t)
+        g = d < tol
+        corr = 0.0
+        if C is not None and g.sum() > 10:
+            A = C[sub][g] - C[sub][g].mean(axis=0)
+            B = C[j[g]] - C[j[g]].mean(axis=0)
+            corr = float((A * B).sum() / math.sqrt((A * A).sum() * (B * B).sum() + 1e-12))
+        return float(g.mean()), corr
+
+    def angle(A: np.ndarray, B: np.ndarray) -> float:
+        return math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(A.T @ B) - 1.0) / 2.0))))
+
+    def distinct(found: list) -> list:
+        kept: list = []
+        for f in found:
+            if angle(np.eye(3), f[2]) >= 20 and all(angle(k[2], f[2]) >= 20 for k in kept):
+                kept.append(f)
+        return kept
+
+    c = surface.centroid
+    found = []
+    for a in _half_turn_axes(n_axes):
+        R = Rotation.from_rotvec(math.pi * a).as_matrix()
+        R, t = icp(R, c - R @ c, tree.query, True)
+        fit, corr = fit_of(R, t)
+        if fit >= min_fit:
+            found.append((round(fit, 1), corr, R, t))
+    found.sort(key=lambda f: (-f[0], -f[1]))
+    kept = distinct(found)
+    if len(kept) > keep and C is not None:
+        # chromaticity scaled so that its spread weighs like 5 % of the diameter
+        w = 0.05 * surface.diameter / max(float(C.std(axis=0).mean()), 1e-3)
+        jtree = cKDTree(np.hstack([P, w * C]))
+        Cs = w * C[sub]
+
+        def joint(Q: np.ndarray):
+            _, j = jtree.query(np.hstack([Q, Cs]))
+            return np.linalg.norm(Q - P[j], axis=1), j
+
+        again = []
+        for f in kept:
+            R, t = icp(f[2], f[3], joint, False)
+            fit, corr = fit_of(R, t)
+            if fit >= min_fit:
+                again.append((round(fit, 1), corr, R, t))
+        kept = distinct(sorted(again, key=lambda f: (-f[1], -f[0])))
+    kept = kept[:keep]
+    out = np.stack([X_from(f[2], f[3]) for f in kept]) if kept else np.zeros((0, 4, 4))
+    surface._f32[key] = out
+    return out
+
+
 @dataclass
 class Scores:
     """Per-hypothesis terms of :func:`score_hypotheses`: ``score``, ``depth``, ``iou``, ``texture``,
@@ -163,14 +324,15 @@ class Scores:
 
 
 @numba.njit(cache=True, fastmath=True, nogil=True)
-def _score_kernel(pts, nrm, grey, chrom, textured, Rs, ts, fx, fy, cx, cy, depth, mask, rgb, cell, gw, gh, mcell,
-                  tau, zbuf, sil, su, sv, sz, out):  # pragma: no cover - njit
+def _score_kernel(pts, nrm, grey, chrom, gdet, textured, Rs, ts, fx, fy, cx, cy, depth, mask, rgb, fdet, cell, gw,
+                  gh, mcell, tau, zbuf, sil, su, sv, sz, out):  # pragma: no cover - njit
     """Per hypothesis ``h`` (pose ``Rs[h]``, ``ts[h]``): project the front-facing samples ``pts``
     (normals ``nrm``) into the image's cell grid (``cell`` pixels, ``gw`` x ``gh``), keep the nearest
     per cell (``zbuf``), then classify the visible samples against ``depth`` and ``mask`` and accumulate
     into ``out[h]``: agree, wrong, visible, silhouette cells, silhouette & mask cells, then the texture
     sums of the agreeing samples in the mask (n; grey: sum m, sum f, sum m^2, sum f^2, sum m f;
-    chromaticity: sum m (3), sum f (3), sum |m|^2, sum |f|^2, sum m . f)."""
+    chromaticity: sum m (3), sum f (3), sum |m|^2, sum |f|^2, sum m . f; grey detail ``gdet`` against
+    ``fdet``: sum m, sum f, sum m^2, sum f^2, sum m f)."""
     N = pts.shape[0]
     Hh, Ww = depth.shape
     G = gw * gh
@@ -205,7 +367,7 @@ def _score_kernel(pts, nrm, grey, chrom, textured, Rs, ts, fx, fy, cx, cy, depth
         agree = 0.0
         wrong = 0.0
         nvis = 0.0
-        acc = np.zeros(15)
+        acc = np.zeros(20)
         for k in range(N):
             z = sz[k]
             if z < 0:
@@ -249,6 +411,13 @@ def _score_kernel(pts, nrm, grey, chrom, textured, Rs, ts, fx, fy, cx, cy, depth
                         acc[12] += cm * cm
                         acc[13] += cf * cf
                         acc[14] += cm * cf
+                    dm = gdet[k]
+                    df = fdet[v, u]
+                    acc[15] += dm
+                    acc[16] += df
+                    acc[17] += dm * dm
+                    acc[18] += df * df
+                    acc[19] += dm * df
             else:
                 wrong += 1.0
         nsil = 0.0
@@ -266,7 +435,7 @@ def _score_kernel(pts, nrm, grey, chrom, textured, Rs, ts, fx, fy, cx, cy, depth
         out[h, 2] = nvis
         out[h, 3] = ninter
         out[h, 4] = nsil + nmask - ninter
-        for j in range(15):
+        for j in range(20):
             out[h, 5 + j] = acc[j]
 
 
@@ -285,11 +454,11 @@ def _corr_from_sums(n, sa, sb, saa, sbb, sab):
 def warmup() -> None:
     """Compile :func:`_score_kernel` (or load it from Numba's cache) on a tiny input."""
     f4 = np.float32
-    _score_kernel(np.zeros((1, 3), f4), np.zeros((1, 3), f4), np.zeros(1, f4), np.zeros((1, 3), f4), True,
-                  np.eye(3, dtype=f4)[None], np.zeros((1, 3), f4), 1.0, 1.0, 0.0, 0.0, np.zeros((2, 2), f4),
-                  np.zeros((2, 2), np.bool_), np.zeros((2, 2, 3), np.uint8), 1, 2, 2, np.zeros(4, np.bool_), 0.01,
-                  np.zeros(4), np.zeros(4, np.bool_), np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(1),
-                  np.zeros((1, 20)))
+    _score_kernel(np.zeros((1, 3), f4), np.zeros((1, 3), f4), np.zeros(1, f4), np.zeros((1, 3), f4),
+                  np.zeros(1, f4), True, np.eye(3, dtype=f4)[None], np.zeros((1, 3), f4), 1.0, 1.0, 0.0, 0.0,
+                  np.zeros((2, 2), f4), np.zeros((2, 2), np.bool_), np.zeros((2, 2, 3), np.uint8),
+                  np.zeros((2, 2), f4), 1, 2, 2, np.zeros(4, np.bool_), 0.01, np.zeros(4), np.zeros(4, np.bool_),
+                  np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(1), np.zeros((1, 25)))
 
 
 def score_hypotheses(Xs: np.ndarray, surface: Surface, frame: Frame, cfg: RegistrationConfig) -> Scores:
@@ -332,10 +501,16 @@ def score_hypotheses(Xs: np.ndarray, surface: Surface, frame: Frame, cfg: Regist
     grey = surface.cast("grey") if textured else np.zeros(1, f4)
     chrom = surface.cast("chroma") if textured else np.zeros((1, 3), f4)
     depth = frame.depth if frame.depth.dtype == f4 else frame.depth.astype(f4)
-    out = np.zeros((H, 20))
-    _score_kernel(pts, nrm, grey, chrom, textured, Xs[:, :3, :3].astype(f4), Xs[:, :3, 3].astype(f4), fx, fy, cx, cy,
-                  depth, np.ascontiguousarray(frame.mask, dtype=np.bool_), np.ascontiguousarray(rgb), cell, gw, gh,
-                  mcell, cfg.verify_tau_rel * surface.diameter, np.empty(G), np.empty(G, np.bool_),
+    dshare = cfg.verify_detail_share if (textured and surface.detail is not None) else 0.0
+    if dshare > 0:
+        gdet = surface.cast("detail")
+        fdet = frame.detail(max(fx, fy) * surface.detail_radius / max(zmed, 1e-3))
+    else:  # the kernel reads them only where texture is scored: zeros of the right shapes
+        gdet, fdet = np.zeros(Np, f4), np.zeros(depth.shape, f4)
+    out = np.zeros((H, 25))
+    _score_kernel(pts, nrm, grey, chrom, gdet, textured, Xs[:, :3, :3].astype(f4), Xs[:, :3, 3].astype(f4), fx, fy,
+                  cx, cy, depth, np.ascontiguousarray(frame.mask, dtype=np.bool_), np.ascontiguousarray(rgb), fdet,
+                  cell, gw, gh, mcell, cfg.verify_tau_rel * surface.diameter, np.empty(G), np.empty(G, np.bool_),
                   np.empty(Np, np.int64), np.empty(Np, np.int64), np.empty(Np), out)
     agree, wrong, n_vis, inter, union = out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4]
     depth_s = agree / np.maximum(agree + wrong, 1.0)
@@ -346,7 +521,11 @@ def score_hypotheses(Xs: np.ndarray, surface: Surface, frame: Frame, cfg: Regist
         ncc_g = _corr_from_sums(n, out[:, 6:7], out[:, 7:8], out[:, 8], out[:, 9], out[:, 10])
         ncc_c = _corr_from_sums(n, out[:, 11:14], out[:, 14:17], out[:, 17], out[:, 18], out[:, 19])
         share = cfg.verify_grey_share
-        texture = np.where(out[:, 5] >= 3, share * ncc_g + (1.0 - share) * ncc_c, 0.0)
+        tex = share * ncc_g + (1.0 - share) * ncc_c
+        if dshare > 0:
+            ncc_d = _corr_from_sums(n, out[:, 20:21], out[:, 21:22], out[:, 22], out[:, 23], out[:, 24])
+            tex = (1.0 - dshare) * tex + dshare * ncc_d
+        texture = np.where(out[:, 5] >= 3, tex, 0.0)
     wd, wm, wt = cfg.verify_w_depth, cfg.verify_w_mask, (cfg.verify_w_texture if textured else 0.0)
     score = (wd * depth_s + wm * iou + wt * texture) / max(wd + wm + wt, 1e-12)
     score = np.where(n_vis > 0, score, -1.0)
@@ -443,6 +622,8 @@ def verify_hypotheses(
     if extra is not None:
         bases += [np.asarray(e, dtype=np.float64) for e in extra]
     T = turns(surface, cfg.verify_turns) if cfg.verify_turns > 1 else np.eye(4)[None]
+    if cfg.verify_near_symmetries > 0:
+        T = np.concatenate([T, near_symmetries(surface, keep=cfg.verify_near_symmetries)])
     Xs = np.einsum("bij,tjk->btik", np.stack(bases), T).reshape(-1, 4, 4)
     if cfg.verify_recentre:
         Xs = np.concatenate([Xs, recentred(Xs[1:], surface, frame)])

@@ -147,6 +147,12 @@ class RegistrationConfig(Config):
             lead over the input pose another hypothesis needs to replace it. verify_grey_share: share of
             the grey NCC in the texture term (the rest: chromaticity correlation). verify_recentre: also
             score every turned hypothesis moved onto the observed cloud's centroid.
+            verify_near_symmetries: also turn every base by the model's near-symmetries, this many at
+            most (:func:`~sixdpose.registration.hypotheses.near_symmetries`; 0: none).
+            verify_detail_share: share of the grey-detail correlation in the texture term (the model's
+            grey minus its local mean over ``verify_detail_rel`` x the diameter, against the frame's
+            grey minus its local mean inside the mask: printing and logos, which chromaticity misses
+            on a white and black label, without the shading that misleads the plain grey NCC).
             verify_search_rounds, verify_search_n, verify_search_deg: local search of the best
             ``verify_icp`` hypotheses before ICP (:func:`~sixdpose.registration.hypotheses.local_search`;
             0 rounds: none). verify_retry_below, verify_retries: an instance whose verified score stays
@@ -218,6 +224,9 @@ class RegistrationConfig(Config):
     verify_min_gain: float = bounded(0.03, min=0, max=10)
     verify_grey_share: float = bounded(0.0, min=0, max=1)
     verify_recentre: bool = False
+    verify_near_symmetries: int = bounded(0, min=0, max=100)
+    verify_detail_share: float = bounded(0.0, min=0, max=1)
+    verify_detail_rel: float = bounded(0.05, min=0, max=1)
     verify_search_rounds: int = bounded(0, min=0, max=100)
     verify_search_n: int = bounded(32, min=1, max=100_000)
     verify_search_deg: float = bounded(30.0, min=0, max=180, min_open=True)
