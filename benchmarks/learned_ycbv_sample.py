@@ -1,11 +1,12 @@
 """A learned pose run on the real YCB-Video sample, leave-one-scene-out: alone, + ICP, + verification.
 
 For each pose run given (``--pose LABEL=RUN_DIR``, repeatable) and each variant (alone, ``--icp``,
-``--verify``, ``--icp --verify``) this runs, unless its CSV is already there (so an interrupted
-collection resumes)::
+``--verify``, ``--icp --verify``, and ``--icp --colour-verify --verify`` with the wider verification
+settings of :data:`WIDE`) this runs, unless its CSV is already there (so an interrupted collection
+resumes)::
 
     sixdpose predict-pose --pose RUN --data ../shared/data/ycbv_sample --split train_real --masks gt \\
-        [--icp] [--verify] --out <work>/<label>_<variant>.csv
+        [--icp] [--colour-verify] [--verify] [--set ...] --out <work>/<label>_<variant>.csv
 
 then scores the CSV on each scene of the sample alone and on both (``evaluate --scenes``; GT masks,
 ``--min-px 0``, BOP symmetric ids 1,13,14,16,18-21) and writes ``results/learned_ycbv_sample.json``:
@@ -31,8 +32,15 @@ from pathlib import Path
 
 from sixdpose.artifacts.results import write_result
 
-#: (variant label, predict-pose switches)
-VARIANTS = [("alone", []), ("+ ICP", ["--icp"]), ("+ verify", ["--verify"]), ("+ ICP + verify", ["--icp", "--verify"])]
+#: the verification's wider settings, chosen on the synthetic val split (never on the sample): the model's
+#: near-symmetries as hypotheses, the grey-detail texture term and the hypotheses recentred on the cloud
+WIDE = ["--set", "verify_near_symmetries=6", "--set", "verify_detail_share=0.5", "--set", "verify_detail_rel=0.1",
+        "--set", "verify_recentre=true"]
+#: (variant label, file stem, predict-pose switches)
+VARIANTS = [("alone", "alone", []), ("+ ICP", "icp", ["--icp"]), ("+ verify", "verify", ["--verify"]),
+            ("+ ICP + verify", "icp_verify", ["--icp", "--verify"]),
+            ("+ ICP + colour search + wide verify", "icp_colour_verify_wide",
+             ["--icp", "--colour-verify", "--verify", *WIDE])]
 SYMMETRIC_IDS = "1,13,14,16,18,19,20,21"
 
 
@@ -61,8 +69,8 @@ def main() -> None:
         label, _, run = spec.partition("=")
         if not run or not Path(run, "model.pt").is_file():
             sys.exit(f"learned_ycbv_sample: --pose {spec}: expected LABEL=RUN_DIR with a model.pt")
-        for variant, switches in VARIANTS:
-            stem = f"{label}_{'_'.join(s.strip('-') for s in switches) or 'alone'}"
+        for variant, suffix, switches in VARIANTS:
+            stem = f"{label}_{suffix}"
             out = work / f"{stem}.csv"
             if not out.is_file():
                 _cli("predict-pose", "--pose", run, "--data", a.data, "--split", "train_real", "--masks", "gt",

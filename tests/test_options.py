@@ -200,6 +200,18 @@ def test_predict_pose_set_inference_fields(tmp_path, capsys):
         assert len(err) == 1 and field in err[0], (kv, err)
         assert not out.exists()
     assert check_inference_overrides({"num_points": 1000}) == {"num_points": 1000}
+    # and the verification's settings (registration config, verify_* fields), typed the same way
+    from sixdpose.registration.presets import RegistrationConfig
+
+    assert check_inference_overrides({"num_points": 1000, "verify_near_symmetries": 6}) == {
+        "num_points": 1000, "verify_near_symmetries": 6}
+    vcases = [c for c in _set_cases(RegistrationConfig) if c[1].startswith("verify_")]
+    assert len(vcases) > 10
+    for kv, field in vcases:
+        assert main([*base, "--verify", "--set", kv]) == 2, kv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and field in err[0], (kv, err)
+        assert not out.exists()
 
 
 @pytest.mark.parametrize("command", ["generate", "train-seg", "train-pose", "train-refiner", "register",

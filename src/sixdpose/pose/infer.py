@@ -94,12 +94,30 @@ def _orthonormalise(R: np.ndarray) -> np.ndarray:
 INFERENCE_FIELDS = ("num_points", "min_points")
 
 
-def check_inference_overrides(overrides: dict | None) -> dict:
-    """``overrides`` checked before any work: only :data:`INFERENCE_FIELDS`, each of the field's type and
-    bounds. Raises :class:`~sixdpose.errors.ConfigError`."""
-    from ..config import check_overrides
+def _verify_fields() -> tuple[str, ...]:
+    """The ``verify_*`` fields of the registration stage's config (the verification's settings)."""
+    import dataclasses
 
-    return check_overrides(PoseConfig, overrides, INFERENCE_FIELDS, "predict-pose")
+    from ..registration.presets import RegistrationConfig
+
+    return tuple(f.name for f in dataclasses.fields(RegistrationConfig) if f.name.startswith("verify_"))
+
+
+def check_inference_overrides(overrides: dict | None) -> dict:
+    """``overrides`` checked before any work: only :data:`INFERENCE_FIELDS` of the pose run's config and
+    the ``verify_*`` fields of the registration config (the hypothesis verification's settings, used
+    with ``--verify``), each of the field's type and bounds. Raises :class:`~sixdpose.errors.ConfigError`."""
+    from ..config import check_overrides
+    from ..registration.presets import RegistrationConfig
+
+    overrides = dict(overrides or {})
+    vf = _verify_fields()
+    reg = {k: v for k, v in overrides.items() if k in vf}
+    pose = check_overrides(PoseConfig, {k: v for k, v in overrides.items() if k not in vf},
+                           INFERENCE_FIELDS + vf, "predict-pose")
+    if reg:
+        RegistrationConfig().replace(**reg)  # type and bounds
+    return {**pose, **reg}
 
 
 class Estimator:
@@ -116,7 +134,8 @@ class Estimator:
         reader: the dataset reader (its models are needed by ``icp`` / ``colour_verify``).
         score_thresh: predicted masks below this score are ignored. seed: point-sampling seed.
         max_batch: most instances per forward pass (crop mode).
-        overrides: :data:`INFERENCE_FIELDS` of the pose run's config to change (``predict-pose --set``).
+        overrides: :data:`INFERENCE_FIELDS` of the pose run's config, and ``verify_*`` fields of the
+            registration config (with ``verify``), to change (``predict-pose --set``).
     Raises:
         CheckpointError: corrupt/incompatible checkpoints, or a refiner of another pose run.
         ConfigError: a bad override.
@@ -130,6 +149,9 @@ class Estimator:
 
         dev = pick_device(device)  # auto / None: the GPU when present
         overrides = check_inference_overrides(overrides)
+        vf = _verify_fields()
+        reg_overrides = {k: v for k, v in overrides.items() if k in vf}
+        overrides = {k: v for k, v in overrides.items() if k not in vf}
         pose_ckpt = ck.load(pose, kind="pose")
         net, cfg = load_posenet(pose_ckpt, dev)
         cfg = cfg.replace(**overrides) if overrides else cfg
@@ -138,7 +160,7 @@ class Estimator:
             refiner_ckpt = ck.load(refiner, kind="refiner")
             ref_net, ref_cfg = load_refiner(refiner_ckpt, pose_ckpt, dev)
         self._setup(net, cfg, ck.classes_of(pose_ckpt), ref_net, ref_cfg, dev, iterations, icp, colour_verify, reader,
-                    score_thresh, seed, max_batch, verify=verify)
+                    score_thresh, seed, max_batch, verify=verify, reg_overrides=reg_overrides)
         self.pose_ckpt, self.refiner_ckpt = pose_ckpt, refiner_ckpt
 
     @classmethod
@@ -159,7 +181,7 @@ class Estimator:
         return est
 
     def _setup(self, net, cfg, classes, refiner, refiner_cfg, device, iterations, icp, colour_verify, reader,
-               score_thresh, seed, max_batch, verify: bool = False) -> None:
+               score_thresh, seed, max_batch, verify: bool = False, reg_overrides: dict | None = None) -> None:
         """Every attribute of an estimator but the checkpoints (shared by both constructors)."""
         self.device, self.net, self.cfg = device, net, cfg
         self.classes = [tuple(c) for c in classes]
@@ -186,7 +208,7 @@ class Estimator:
                 raise PoseError("ICP and colour verification need the dataset reader (its object models)")
             from ..registration import ReferenceCache, get_preset
 
-            self.reg_cfg = get_preset("default", verify=verify)
+            self.reg_cfg = get_preset("default", verify=verify, **(reg_overrides or {}))
             self._cache = ReferenceCache(reader)
 
     def settings(self) -> dict:
@@ -197,6 +219,7 @@ class Estimator:
             "refiner_config": self.refiner_cfg.to_dict() if self.refiner_cfg else None,
             "iterations": self.iterations, "icp": self.icp, "colour_verify": self.colour_verify,
             "verify": self.verify,
+            "verify_config": ({k: getattr(self.reg_cfg, k) for k in _verify_fields()} if self.verify else None),
             "score_thresh": self.score_thresh, "seed": self.seed, "device": str(self.device),
         }
 
