@@ -98,7 +98,7 @@ def _verify_fields() -> tuple[str, ...]:
     """The ``verify_*`` fields of the registration stage's config (the verification's settings)."""
     import dataclasses
 
-    from ..registration.presets import RegistrationConfig
+    from ..registration import RegistrationConfig
 
     return tuple(f.name for f in dataclasses.fields(RegistrationConfig) if f.name.startswith("verify_"))
 
@@ -108,7 +108,7 @@ def check_inference_overrides(overrides: dict | None) -> dict:
     the ``verify_*`` fields of the registration config (the hypothesis verification's settings, used
     with ``--verify``), each of the field's type and bounds. Raises :class:`~sixdpose.errors.ConfigError`."""
     from ..config import check_overrides
-    from ..registration.presets import RegistrationConfig
+    from ..registration import RegistrationConfig
 
     overrides = dict(overrides or {})
     vf = _verify_fields()
