@@ -103,6 +103,12 @@ def _verify_fields() -> tuple[str, ...]:
     return tuple(f.name for f in dataclasses.fields(RegistrationConfig) if f.name.startswith("verify_"))
 
 
+def _split_overrides(overrides: dict) -> tuple[dict, dict]:
+    """``(pose run's fields, verification's verify_* fields)`` of ``overrides``."""
+    vf = _verify_fields()
+    return ({k: v for k, v in overrides.items() if k not in vf}, {k: v for k, v in overrides.items() if k in vf})
+
+
 def check_inference_overrides(overrides: dict | None) -> dict:
     """``overrides`` checked before any work: only :data:`INFERENCE_FIELDS` of the pose run's config and
     the ``verify_*`` fields of the registration config (the hypothesis verification's settings, used
@@ -110,11 +116,9 @@ def check_inference_overrides(overrides: dict | None) -> dict:
     from ..config import check_overrides
     from ..registration import RegistrationConfig
 
-    overrides = dict(overrides or {})
-    vf = _verify_fields()
-    reg = {k: v for k, v in overrides.items() if k in vf}
-    pose = check_overrides(PoseConfig, {k: v for k, v in overrides.items() if k not in vf},
-                           INFERENCE_FIELDS + vf, "predict-pose")
+    pose, reg = _split_overrides(dict(overrides or {}))
+    # the verify_* fields are named among the allowed ones in the error message
+    pose = check_overrides(PoseConfig, pose, INFERENCE_FIELDS + _verify_fields(), "predict-pose")
     if reg:
         RegistrationConfig().replace(**reg)  # type and bounds
     return {**pose, **reg}
@@ -148,10 +152,7 @@ class Estimator:
         from ..runs import pick_device
 
         dev = pick_device(device)  # auto / None: the GPU when present
-        overrides = check_inference_overrides(overrides)
-        vf = _verify_fields()
-        reg_overrides = {k: v for k, v in overrides.items() if k in vf}
-        overrides = {k: v for k, v in overrides.items() if k not in vf}
+        overrides, reg_overrides = _split_overrides(check_inference_overrides(overrides))
         pose_ckpt = ck.load(pose, kind="pose")
         net, cfg = load_posenet(pose_ckpt, dev)
         cfg = cfg.replace(**overrides) if overrides else cfg

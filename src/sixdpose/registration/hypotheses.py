@@ -116,6 +116,7 @@ class Surface:
 
     def __post_init__(self):
         self._f32: dict = {}
+        self._near: dict = {}  # near_symmetries() by its arguments
 
     def cast(self, name: str) -> np.ndarray:
         """The attribute ``name`` as a contiguous float32 array (cached: the Numba kernel's input)."""
@@ -187,15 +188,6 @@ def turns(surface: Surface, n_turns: int) -> np.ndarray:
     return np.stack(out)
 
 
-def _kabsch(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The rigid motion ``(R, t)`` minimising ``|R A + t - B|`` over paired (N, 3) points."""
-    ca, cb = A.mean(axis=0), B.mean(axis=0)
-    U, _, Vt = np.linalg.svd((A - ca).T @ (B - cb))
-    D = np.diag([1.0, 1.0, float(np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0)])
-    R = Vt.T @ D @ U.T
-    return R, cb - R @ ca
-
-
 def _half_turn_axes(n: int) -> np.ndarray:
     """``n`` unit axes spread evenly over a hemisphere (a Fibonacci lattice; a half-turn about ``a`` is
     the half-turn about ``-a``)."""
@@ -224,16 +216,20 @@ def near_symmetries(surface: Surface, n_axes: int = 150, keep: int = 6, min_fit:
     ``surface`` (about 1 s per object). Not in the paper.
     """
     key = ("near_symmetries", n_axes, keep, min_fit, n_points, iterations, seed)
-    hit = surface._f32.get(key)
+    hit = surface._near.get(key)
     if hit is not None:
         return hit
     from scipy.spatial import cKDTree
     from scipy.spatial.transform import Rotation
 
+    from ..evaluation.metrics import rotation_error
+    from .super4pcs import kabsch_batch
+
     P, C = surface.points, surface.chroma
     rng = np.random.default_rng(seed)
     sub = rng.choice(len(P), min(n_points, len(P)), replace=False)
     Ps = P[sub]
+    C_sub = None if C is None else C[sub]
     tree = cKDTree(P)
     tol = 0.02 * surface.diameter
 
@@ -253,7 +249,8 @@ def near_symmetries(surface: Surface, n_axes: int = 150, keep: int = 6, min_fit:
                 dR = Rotation.from_rotvec(x[:3]).as_matrix()
                 dt = x[3:]
             else:
-                dR, dt = _kabsch(Q[inl], P[j[inl]])
+                dRs, dts = kabsch_batch(Q[inl], P[j[inl]][None])
+                dR, dt = dRs[0], dts[0]
             R, t = dR @ R, dR @ t + dt
         return R, t
 
@@ -261,19 +258,16 @@ def near_symmetries(surface: Surface, n_axes: int = 150, keep: int = 6, min_fit:
         d, j = tree.query(Ps @ R.T + t)
         g = d < tol
         corr = 0.0
-        if C is not None and g.sum() > 10:
-            A = C[sub][g] - C[sub][g].mean(axis=0)
+        if C is not None and C_sub is not None and g.sum() > 10:
+            A = C_sub[g] - C_sub[g].mean(axis=0)
             B = C[j[g]] - C[j[g]].mean(axis=0)
             corr = float((A * B).sum() / math.sqrt((A * A).sum() * (B * B).sum() + 1e-12))
         return float(g.mean()), corr
 
-    def angle(A: np.ndarray, B: np.ndarray) -> float:
-        return math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(A.T @ B) - 1.0) / 2.0))))
-
     def distinct(found: list) -> list:
         kept: list = []
         for f in found:
-            if angle(np.eye(3), f[2]) >= 20 and all(angle(k[2], f[2]) >= 20 for k in kept):
+            if rotation_error(f[2], np.eye(3)) >= 20 and all(rotation_error(f[2], k[2]) >= 20 for k in kept):
                 kept.append(f)
         return kept
 
@@ -287,11 +281,11 @@ def near_symmetries(surface: Surface, n_axes: int = 150, keep: int = 6, min_fit:
             found.append((round(fit, 1), corr, R, t))
     found.sort(key=lambda f: (-f[0], -f[1]))
     kept = distinct(found)
-    if len(kept) > keep and C is not None:
+    if len(kept) > keep and C is not None and C_sub is not None:
         # chromaticity scaled so that its spread weighs like 5 % of the diameter
         w = 0.05 * surface.diameter / max(float(C.std(axis=0).mean()), 1e-3)
         jtree = cKDTree(np.hstack([P, w * C]))
-        Cs = w * C[sub]
+        Cs = w * C_sub
 
         def joint(Q: np.ndarray):
             _, j = jtree.query(np.hstack([Q, Cs]))
@@ -306,7 +300,7 @@ def near_symmetries(surface: Surface, n_axes: int = 150, keep: int = 6, min_fit:
         kept = distinct(sorted(again, key=lambda f: (-f[1], -f[0])))
     kept = kept[:keep]
     out = np.stack([X_from(f[2], f[3]) for f in kept]) if kept else np.zeros((0, 4, 4))
-    surface._f32[key] = out
+    surface._near[key] = out
     return out
 
 
@@ -324,15 +318,15 @@ class Scores:
 
 
 @numba.njit(cache=True, fastmath=True, nogil=True)
-def _score_kernel(pts, nrm, grey, chrom, gdet, textured, Rs, ts, fx, fy, cx, cy, depth, mask, rgb, fdet, cell, gw,
-                  gh, mcell, tau, zbuf, sil, su, sv, sz, out):  # pragma: no cover - njit
+def _score_kernel(pts, nrm, grey, chrom, gdet, textured, detailed, Rs, ts, fx, fy, cx, cy, depth, mask, rgb, fdet,
+                  cell, gw, gh, mcell, tau, zbuf, sil, su, sv, sz, out):  # pragma: no cover - njit
     """Per hypothesis ``h`` (pose ``Rs[h]``, ``ts[h]``): project the front-facing samples ``pts``
     (normals ``nrm``) into the image's cell grid (``cell`` pixels, ``gw`` x ``gh``), keep the nearest
     per cell (``zbuf``), then classify the visible samples against ``depth`` and ``mask`` and accumulate
     into ``out[h]``: agree, wrong, visible, silhouette cells, silhouette & mask cells, then the texture
     sums of the agreeing samples in the mask (n; grey: sum m, sum f, sum m^2, sum f^2, sum m f;
-    chromaticity: sum m (3), sum f (3), sum |m|^2, sum |f|^2, sum m . f; grey detail ``gdet`` against
-    ``fdet``: sum m, sum f, sum m^2, sum f^2, sum m f)."""
+    chromaticity: sum m (3), sum f (3), sum |m|^2, sum |f|^2, sum m . f; with ``detailed``, grey detail
+    ``gdet`` against ``fdet``: sum m, sum f, sum m^2, sum f^2, sum m f)."""
     N = pts.shape[0]
     Hh, Ww = depth.shape
     G = gw * gh
@@ -411,13 +405,14 @@ def _score_kernel(pts, nrm, grey, chrom, gdet, textured, Rs, ts, fx, fy, cx, cy,
                         acc[12] += cm * cm
                         acc[13] += cf * cf
                         acc[14] += cm * cf
-                    dm = gdet[k]
-                    df = fdet[v, u]
-                    acc[15] += dm
-                    acc[16] += df
-                    acc[17] += dm * dm
-                    acc[18] += df * df
-                    acc[19] += dm * df
+                    if detailed:
+                        dm = gdet[k]
+                        df = fdet[v, u]
+                        acc[15] += dm
+                        acc[16] += df
+                        acc[17] += dm * dm
+                        acc[18] += df * df
+                        acc[19] += dm * df
             else:
                 wrong += 1.0
         nsil = 0.0
@@ -455,7 +450,7 @@ def warmup() -> None:
     """Compile :func:`_score_kernel` (or load it from Numba's cache) on a tiny input."""
     f4 = np.float32
     _score_kernel(np.zeros((1, 3), f4), np.zeros((1, 3), f4), np.zeros(1, f4), np.zeros((1, 3), f4),
-                  np.zeros(1, f4), True, np.eye(3, dtype=f4)[None], np.zeros((1, 3), f4), 1.0, 1.0, 0.0, 0.0,
+                  np.zeros(1, f4), True, True, np.eye(3, dtype=f4)[None], np.zeros((1, 3), f4), 1.0, 1.0, 0.0, 0.0,
                   np.zeros((2, 2), f4), np.zeros((2, 2), np.bool_), np.zeros((2, 2, 3), np.uint8),
                   np.zeros((2, 2), f4), 1, 2, 2, np.zeros(4, np.bool_), 0.01, np.zeros(4), np.zeros(4, np.bool_),
                   np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(1), np.zeros((1, 25)))
@@ -505,13 +500,14 @@ def score_hypotheses(Xs: np.ndarray, surface: Surface, frame: Frame, cfg: Regist
     if dshare > 0:
         gdet = surface.cast("detail")
         fdet = frame.detail(max(fx, fy) * surface.detail_radius / max(zmed, 1e-3))
-    else:  # the kernel reads them only where texture is scored: zeros of the right shapes
-        gdet, fdet = np.zeros(Np, f4), np.zeros(depth.shape, f4)
+    else:  # not read by the kernel
+        gdet, fdet = np.zeros(1, f4), np.zeros((1, 1), f4)
     out = np.zeros((H, 25))
-    _score_kernel(pts, nrm, grey, chrom, gdet, textured, Xs[:, :3, :3].astype(f4), Xs[:, :3, 3].astype(f4), fx, fy,
-                  cx, cy, depth, np.ascontiguousarray(frame.mask, dtype=np.bool_), np.ascontiguousarray(rgb), fdet,
-                  cell, gw, gh, mcell, cfg.verify_tau_rel * surface.diameter, np.empty(G), np.empty(G, np.bool_),
-                  np.empty(Np, np.int64), np.empty(Np, np.int64), np.empty(Np), out)
+    _score_kernel(pts, nrm, grey, chrom, gdet, textured, dshare > 0, Xs[:, :3, :3].astype(f4),
+                  Xs[:, :3, 3].astype(f4), fx, fy, cx, cy, depth, np.ascontiguousarray(frame.mask, dtype=np.bool_),
+                  np.ascontiguousarray(rgb), fdet, cell, gw, gh, mcell, cfg.verify_tau_rel * surface.diameter,
+                  np.empty(G), np.empty(G, np.bool_), np.empty(Np, np.int64), np.empty(Np, np.int64), np.empty(Np),
+                  out)
     agree, wrong, n_vis, inter, union = out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4]
     depth_s = agree / np.maximum(agree + wrong, 1.0)
     iou = inter / np.maximum(union, 1.0)
