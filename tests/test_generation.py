@@ -137,6 +137,28 @@ def test_workers_identical(tiny_dataset, tmp_path, ycb_dir, smoke_config):
     assert tree_digest(out) == tree_digest(tiny_dataset)
 
 
+def test_replaced_workers_finish():
+    """The generation pool replaces its workers (every ``_TASKS_PER_WORKER`` scenes): it finishes and exits.
+    The replacements are started by the pool's handler thread; with the kernel's death signal they were
+    killed when that thread ended, an idle one holding the task queue's lock, and ``Pool.terminate``
+    then waited for ever on that lock (``generate --workers 1`` of 60 scenes hung with every scene
+    written; here 2 tasks per worker, 3 tasks, in 8 rounds: the old pool hung in about 1 round of 5)."""
+    code = ("from sixdpose.workers import process_pool\n"
+            "from sixdpose.generation.runner import _worker_init\n"
+            "for _ in range(8):\n"
+            "    with process_pool(1, _worker_init, maxtasksperchild=2) as pool:\n"
+            "        assert sorted(pool.imap_unordered(abs, range(-1, 2))) == [0, 1, 1]\n")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        _, err = proc.communicate(timeout=180)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        pytest.fail("a pool with replaced workers did not exit")
+    assert proc.returncode == 0, err[-2000:]
+
+
 def test_ray_executor(tiny_dataset, tmp_path, ycb_dir, smoke_config):
     pytest.importorskip("ray")
     from sixdpose.generation import generate

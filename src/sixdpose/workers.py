@@ -12,6 +12,19 @@ Two rules, the same for every pool:
   them, so that not even a worker still importing can print a ``KeyboardInterrupt`` traceback); the
   parent's ``KeyboardInterrupt`` leaves the pool's ``with`` block, which terminates the workers, and
   the command line prints one line (exit status 130).
+
+:func:`process_pool` starts a pool under both rules and ends it: on success it closes the pool and waits
+for its workers (``close`` + ``join``), on an exception or ``GeneratorExit`` it terminates them.
+``Pool.terminate`` (what a pool's own ``with`` block calls, also on success) first takes the task
+queue's read lock, which an idle worker holds while it waits for a task: a worker killed while it waits
+leaves that lock taken and ``terminate`` waits for ever.
+
+``PR_SET_PDEATHSIG`` fires when the *thread* that started the worker ends, not the process. A pool with
+``maxtasksperchild`` starts the replacement workers from its own handler thread, which ends when the
+pool is terminated: those workers were killed while idle, and ``generate --workers 1`` (60 scenes, a
+worker replaced after 50) hung at the end with every scene written. :func:`process_pool` therefore asks
+for the kernel's signal only for pools that never replace a worker; the others rely on the watcher
+thread (within ``poll_s``).
 """
 
 from __future__ import annotations
@@ -41,16 +54,18 @@ def _watch_parent(parent: int, poll_s: float) -> None:
         time.sleep(poll_s)
 
 
-def init_worker(poll_s: float = 1.0) -> None:
+def init_worker(poll_s: float = 1.0, deathsig: bool = True) -> None:
     """Set up the calling worker process: ignore ``SIGINT`` and die with the parent.
 
-    Call it first in a pool initializer. On Linux the kernel kills the worker the moment its parent
-    dies (``PR_SET_PDEATHSIG`` = ``SIGKILL``); everywhere, a daemon thread exits the worker within
-    ``poll_s`` seconds (float) of the parent's death, and a worker whose parent is already gone exits now.
+    Call it first in a pool initializer. With ``deathsig`` on Linux the kernel kills the worker the
+    moment the parent thread that started it ends (``PR_SET_PDEATHSIG`` = ``SIGKILL``: pass False where a
+    pool's handler thread may start workers, see the module's docstring); everywhere, a daemon thread
+    exits the worker within ``poll_s`` seconds (float) of the parent's death, and a worker whose parent is
+    already gone exits now.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     parent = _parent_pid()
-    if sys.platform.startswith("linux"):
+    if deathsig and sys.platform.startswith("linux"):
         try:
             libc = ctypes.CDLL(None, use_errno=True)
             libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
@@ -77,3 +92,24 @@ def sigint_ignored():
         yield
     finally:
         signal.signal(signal.SIGINT, old if old is not None else signal.SIG_DFL)  # None: set outside Python
+
+
+@contextlib.contextmanager
+def process_pool(workers: int, initializer, initargs: tuple = (), maxtasksperchild: int | None = None):
+    """A ``spawn`` process pool of ``workers`` processes for the ``with`` block, started with Ctrl-C ignored.
+
+    ``initializer(*initargs)`` runs in each worker and should call :func:`init_worker` first, with
+    ``deathsig=maxtasksperchild is None`` (see the module's docstring). Leaving the block normally closes
+    the pool and waits for its workers; leaving it by an exception (``KeyboardInterrupt`` and a closed
+    generator's ``GeneratorExit`` included) terminates them and re-raises.
+    """
+    ctx = multiprocessing.get_context("spawn")
+    with sigint_ignored():  # the workers start with Ctrl-C ignored: the parent alone handles it
+        pool = ctx.Pool(workers, initializer=initializer, initargs=initargs, maxtasksperchild=maxtasksperchild)
+    try:
+        yield pool
+    except BaseException:
+        pool.terminate()
+        raise
+    pool.close()
+    pool.join()

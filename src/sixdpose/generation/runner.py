@@ -153,10 +153,16 @@ class _PropsView(dict):
         return _props(self._catalog, name)
 
 
+#: scenes a generation worker renders before the pool replaces it (bounds the renderer's memory)
+_TASKS_PER_WORKER = 50
+
+
 def _worker_init():
     from ..workers import init_worker
 
-    init_worker()  # die with the parent; Ctrl-C is the parent's (it terminates the pool)
+    # die with the parent; Ctrl-C is the parent's (it terminates the pool). No kernel death signal: the
+    # pool's handler thread starts the replacement workers, and the signal follows that thread's end
+    init_worker(deathsig=False)
     # llvmpipe: one rendering thread per worker (workers are the parallelism)
     os.environ.setdefault("LP_NUM_THREADS", "1")
 
@@ -393,14 +399,11 @@ def _run(todo, out, cfg, objects, workers, executor, address):
     if executor == "ray":
         yield from _run_ray(args, workers, address)
         return
-    import multiprocessing as mp
+    from ..workers import process_pool
 
-    from ..workers import sigint_ignored
-
-    ctx = mp.get_context("spawn")
-    with sigint_ignored():  # the workers start with Ctrl-C ignored: the parent alone handles it
-        pool = ctx.Pool(min(workers, len(args)), initializer=_worker_init, maxtasksperchild=50)
-    with pool:  # leaving the block (also by KeyboardInterrupt or the parent's death) ends the workers
+    # leaving the block by an exception (KeyboardInterrupt, the consumer closing this generator) ends the
+    # workers; finishing closes the pool and waits for them
+    with process_pool(min(workers, len(args)), _worker_init, maxtasksperchild=_TASKS_PER_WORKER) as pool:
         yield from pool.imap_unordered(_worker, args)
 
 

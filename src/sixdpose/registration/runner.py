@@ -330,9 +330,7 @@ def run_registration(
                     bad_images.append(fail)
                 bar.update()
     else:
-        import multiprocessing as mp
-
-        from ..workers import sigint_ignored
+        from ..workers import process_pool
 
         # one thread per worker (Open3D: set_max_threads in the initializer; OpenMP, BLAS: the
         # environment, which spawned children inherit)
@@ -340,9 +338,8 @@ def run_registration(
         for k in saved:
             os.environ[k] = "1"
         try:
-            with sigint_ignored():  # the workers start with Ctrl-C ignored: the parent alone handles it
-                pool = mp.get_context("spawn").Pool(workers, initializer=_init_pool_worker, initargs=args)
-            with pool:  # leaving the block (also by KeyboardInterrupt) terminates the workers
+            # leaving the block by an exception (also KeyboardInterrupt) terminates the workers
+            with process_pool(workers, _init_pool_worker, args) as pool:
                 for r, fail in pool.imap(process_image, idx, chunksize=1):
                     rows.extend(r)
                     if fail:
