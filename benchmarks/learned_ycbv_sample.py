@@ -10,7 +10,9 @@ resumes)::
 
 then scores the CSV on each scene of the sample alone and on both (``evaluate --scenes``; GT masks,
 ``--min-px 0``, BOP symmetric ids 1,13,14,16,18-21) and writes ``results/learned_ycbv_sample.json``:
-one row per run and variant, ``correct/GT (accuracy)`` for scene 000000, scene 000001 and both. The
+one row per run and variant, ``correct/GT (accuracy)`` for scene 000000, scene 000001 and both, and the
+instances estimated per second of ``predict-pose``'s own per-image time (one process, both cores: on an
+otherwise idle machine, for the speed to mean anything). The
 networks are trained only on generated data; scene 000000 is the sample's tuning scene and 000001 the
 held-out one (leave-one-scene-out: choose on one column, report the other).
 
@@ -53,6 +55,16 @@ def _cli(*args: str) -> None:
                  f"{(proc.stderr.strip().splitlines() or ['?'])[-1]}")
 
 
+def _instances_per_s(csv: Path) -> float:
+    """Instances estimated per second of ``predict-pose``'s own time in the results CSV ``csv`` (the rows,
+    over the sum of each image's ``time``, which excludes disk reads); 0.0 where no time was recorded."""
+    from sixdpose.artifacts.poses import read_results
+
+    rows = read_results(csv)
+    seconds = sum({(r.scene_id, r.im_id): r.time for r in rows}.values())
+    return round(len(rows) / seconds, 2) if seconds > 0 else 0.0
+
+
 def main() -> None:
     """Predict, evaluate per scene and write ``results/learned_ycbv_sample.json``; prints the rows."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -76,7 +88,7 @@ def main() -> None:
                 _cli("predict-pose", "--pose", run, "--data", a.data, "--split", "train_real", "--masks", "gt",
                      "--no-progress", "--out", str(out), *switches)
             row = {"run": label, "pose run": run, "variant": variant,
-                   "measured": datetime.date.today().isoformat()}
+                   "measured": datetime.date.today().isoformat(), "instances/s": _instances_per_s(out)}
             for part, col in (("0", "scene 000000 (tuning)"), ("1", "scene 000001 (held out)"), ("all", "both")):
                 ev = work / f"{stem}_eval_{part}"
                 _cli("evaluate", "--data", a.data, "--split", "train_real", "--symmetric-ids", SYMMETRIC_IDS,
@@ -95,7 +107,7 @@ def main() -> None:
             r.setdefault("measured", "an earlier session (its run is not here)")
         rows = rows + kept
     rows = [{k: r.get(k) for k in ("run", "pose run", "variant", "measured", "scene 000000 (tuning)",
-                                   "scene 000001 (held out)", "both")} for r in rows]
+                                   "scene 000001 (held out)", "both", "instances/s")} for r in rows]
     write_result("learned_ycbv_sample", rows, results_dir=a.results_dir, inputs=inputs,
                  description="predict-pose [--icp] [--verify] on ycbv_sample train_real (networks trained on generated "
                              "data only), GT masks, min-px 0, BOP symmetric ids 1,13,14,16,18-21: correct/GT per scene",
