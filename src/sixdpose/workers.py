@@ -22,9 +22,9 @@ leaves that lock taken and ``terminate`` waits for ever.
 ``PR_SET_PDEATHSIG`` fires when the *thread* that started the worker ends, not the process. A pool with
 ``maxtasksperchild`` starts the replacement workers from its own handler thread, which ends when the
 pool is terminated: those workers were killed while idle, and ``generate --workers 1`` (60 scenes, a
-worker replaced after 50) hung at the end with every scene written. :func:`process_pool` therefore asks
-for the kernel's signal only for pools that never replace a worker; the others rely on the watcher
-thread (within ``poll_s``).
+worker replaced after 50) hung at the end with every scene written. :func:`process_pool` therefore sets
+each worker up with the kernel's signal only for pools that never replace a worker; the others rely on
+the watcher thread (within ``poll_s``).
 """
 
 from __future__ import annotations
@@ -94,18 +94,24 @@ def sigint_ignored():
         signal.signal(signal.SIGINT, old if old is not None else signal.SIG_DFL)  # None: set outside Python
 
 
+def _start_worker(deathsig: bool, initializer, *initargs) -> None:
+    init_worker(deathsig=deathsig)
+    initializer(*initargs)
+
+
 @contextlib.contextmanager
 def process_pool(workers: int, initializer, initargs: tuple = (), maxtasksperchild: int | None = None):
     """A ``spawn`` process pool of ``workers`` processes for the ``with`` block, started with Ctrl-C ignored.
 
-    ``initializer(*initargs)`` runs in each worker and should call :func:`init_worker` first, with
-    ``deathsig=maxtasksperchild is None`` (see the module's docstring). Leaving the block normally closes
+    Each worker runs :func:`init_worker` (with the kernel's death signal only when ``maxtasksperchild``
+    is None: see the module's docstring), then ``initializer(*initargs)``. Leaving the block normally closes
     the pool and waits for its workers; leaving it by an exception (``KeyboardInterrupt`` and a closed
     generator's ``GeneratorExit`` included) terminates them and re-raises.
     """
     ctx = multiprocessing.get_context("spawn")
     with sigint_ignored():  # the workers start with Ctrl-C ignored: the parent alone handles it
-        pool = ctx.Pool(workers, initializer=initializer, initargs=initargs, maxtasksperchild=maxtasksperchild)
+        pool = ctx.Pool(workers, initializer=_start_worker,
+                        initargs=(maxtasksperchild is None, initializer, *initargs), maxtasksperchild=maxtasksperchild)
     try:
         yield pool
     except BaseException:

@@ -158,11 +158,7 @@ _TASKS_PER_WORKER = 50
 
 
 def _worker_init():
-    from ..workers import init_worker
-
-    # die with the parent; Ctrl-C is the parent's (it terminates the pool). No kernel death signal: the
-    # pool's handler thread starts the replacement workers, and the signal follows that thread's end
-    init_worker(deathsig=False)
+    # after workers.init_worker (process_pool): die with the parent; Ctrl-C is the parent's
     # llvmpipe: one rendering thread per worker (workers are the parallelism)
     os.environ.setdefault("LP_NUM_THREADS", "1")
 

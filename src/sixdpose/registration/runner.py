@@ -88,10 +88,8 @@ def _one_thread():
 
 
 def _init_pool_worker(*args) -> None:
-    """Initializer of the pool workers: die with the parent, leave Ctrl-C to it, one Open3D thread."""
-    from ..workers import init_worker
-
-    init_worker()
+    """Initializer of the pool workers (after ``workers.init_worker``, which ``process_pool`` runs first:
+    die with the parent, leave Ctrl-C to it): one Open3D thread."""
     _open3d_threads(1)
     _init_worker(*args)
 
