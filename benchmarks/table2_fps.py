@@ -214,7 +214,7 @@ def main(argv: list[str] | None = None) -> int:
         if m in HYBRID:
             algo, icp = HYBRID[m]
             stage, label = hybrid_stage(frames, algo, icp, cfg), f"register --method {algo}" + (" --icp" if icp else "")
-            label += f" (preset {args.preset})"
+            label += f"{'' if cfg.verify else ' --no-verify'} (preset {args.preset})"
         else:
             it = LEARNED[m]
             if it and ref_run is None:

@@ -4,7 +4,7 @@ Reads the evaluations of the results CSVs made by (for M in super4pcs, ransac, f
 ``--verify``; ``runs/verify/<stem>.csv``)::
 
     sixdpose register --data ../shared/data/ycbv_sample --split train_real --method M --icp --masks gt \\
-        --workers 1 [--verify] --out runs/verify/<stem>.csv
+        --workers 1 --verify|--no-verify --out runs/verify/<stem>.csv
     sixdpose evaluate --data ../shared/data/ycbv_sample --split train_real --symmetric-ids \\
         1,13,14,16,18,19,20,21 --min-px 0 --no-bop --results <csv> --out runs/verify/<stem>_eval_<all|0|1>
 
@@ -58,7 +58,7 @@ def run_all(runs: Path, data: str) -> None:
         if not csv_path.is_file():
             subprocess.run([*exe, "register", "--data", data, "--split", SPLIT, "--method", ALGORITHM[label], "--icp",
                             "--masks", "gt", "--min-px", "0", "--workers", "1", "--no-progress",
-                            *(["--verify"] if on else []), "--out", str(csv_path)], check=True)
+                            "--verify" if on else "--no-verify", "--out", str(csv_path)], check=True)
         for part in ("all", "0", "1"):
             subprocess.run([*exe, "evaluate", "--data", data, "--split", SPLIT, "--symmetric-ids", SYMMETRIC,
                             "--min-px", "0", "--no-bop", "--no-progress", "--results", str(csv_path),

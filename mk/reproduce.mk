@@ -109,15 +109,16 @@ $(ABLATION_SEEDS_RESULT): $(TRAIN_DIR)/manifest.json $(ABLATION_VAL)/manifest.js
 	  $(ABLATION_$(PROFILE)) $(ABLATION_SEEDS) --no-progress --result-name pose_ablation_seeds_$(PROFILE) --results-dir $(RES)
 
 # ---- pose estimates: one results CSV per split x masks x method --------------------------------
-CMD_ransac         := register --method ransac
-CMD_ransac_icp     := register --method ransac --icp
-CMD_fgr            := register --method fgr
-CMD_fgr_icp        := register --method fgr --icp
-CMD_super4pcs      := register --method super4pcs
-CMD_super4pcs_icp  := register --method super4pcs --icp
-CMD_ransac_icp_paper := register --method ransac --icp --preset paper
-CMD_fgr_icp_paper    := register --method fgr --icp --preset paper
-CMD_super4pcs_paper  := register --method super4pcs --preset paper
+# the paper's methods without the hypothesis verification that `register` runs by default (--no-verify)
+CMD_ransac         := register --method ransac --no-verify
+CMD_ransac_icp     := register --method ransac --icp --no-verify
+CMD_fgr            := register --method fgr --no-verify
+CMD_fgr_icp        := register --method fgr --icp --no-verify
+CMD_super4pcs      := register --method super4pcs --no-verify
+CMD_super4pcs_icp  := register --method super4pcs --icp --no-verify
+CMD_ransac_icp_paper := register --method ransac --icp --no-verify --preset paper
+CMD_fgr_icp_paper    := register --method fgr --icp --no-verify --preset paper
+CMD_super4pcs_paper  := register --method super4pcs --no-verify --preset paper
 CMD_learned_it0    := predict-pose --pose $(RUNS)/pose --iterations 0
 CMD_learned_it2    := predict-pose --pose $(RUNS)/pose --refiner $(RUNS)/refiner --iterations 2
 CMD_learned_it2_icp    := $(CMD_learned_it2) --icp
@@ -214,9 +215,9 @@ YCBV_CMD_learned_e12          := predict-pose --pose $(RUNS)/pose_ycbv_e12
 YCBV_CMD_learned_ideal_e12    := predict-pose --pose $(RUNS)/pose_ycbv_ideal_e12
 YCBV_CMD_learned_jitter       := predict-pose --pose $(RUNS)/pose_ycbv_jitter
 YCBV_CMD_learned_ideal_jitter := predict-pose --pose $(RUNS)/pose_ycbv_ideal_jitter
-YCBV_CMD_ransac_icp           := register --method ransac --icp --workers $(WORKERS) --min-px 0
-YCBV_CMD_fgr_icp              := register --method fgr --icp --workers $(WORKERS) --min-px 0
-YCBV_CMD_super4pcs_icp        := register --method super4pcs --icp --workers $(WORKERS) --min-px 0
+YCBV_CMD_ransac_icp           := register --method ransac --icp --no-verify --workers $(WORKERS) --min-px 0
+YCBV_CMD_fgr_icp              := register --method fgr --icp --no-verify --workers $(WORKERS) --min-px 0
+YCBV_CMD_super4pcs_icp        := register --method super4pcs --icp --no-verify --workers $(WORKERS) --min-px 0
 YCBV_CMD_super4pcs_icp_verify := register --method super4pcs --icp --verify --workers $(WORKERS) --min-px 0
 YCBV_CMD_dense                := predict-pose --pose $(RUNS)/pose_ycbv_dense
 YCBV_CMD_dense_icp            := predict-pose --pose $(RUNS)/pose_ycbv_dense --icp

@@ -326,3 +326,34 @@ def test_verify_retries_a_poorly_fitting_pose_and_keeps_the_best():
     on = estimate_pose(pts, inst.obj_id, "super4pcs", cache, always, icp=True, frame=frame)
     assert on.info["verify_retries"] == 2 and on.score >= off.score - 1e-9 and on.time > 0
     assert get_preset("default").verify_retry_below > 0  # on by default with --verify
+
+
+def _poses(path) -> list[tuple]:
+    """(scene_id, im_id, obj_id, R, t) of every row of a results CSV: the estimates, times aside."""
+    with open(path, newline="") as f:
+        return [(r["scene_id"], r["im_id"], r["obj_id"], r["R"], r["t"]) for r in csv.DictReader(f)]
+
+
+@pytest.mark.parametrize("args, verify", [
+    ([], True),  # the default profile verifies ...
+    (["--no-verify"], False),  # ... unless told not to
+    (["--set", "verify=false"], False),
+    (["--set", "verify=false", "--verify"], True),  # the flag wins over --set
+    (["--profile", "paper"], False),  # the paper's methods are unverified
+    (["--profile", "paper", "--verify"], True),
+])
+def test_register_verifies_by_default(syn, tmp_path, args, verify):
+    """``register`` runs the hypothesis verification with ``--profile default`` unless ``--no-verify`` (or
+    ``--set verify=false``) says otherwise, not with ``--profile paper`` unless ``--verify``; the choice is
+    recorded in ``<out>.config.yml``, and the default run's estimates are exactly ``--verify``'s."""
+    import yaml
+
+    out = tmp_path / "r.csv"
+    assert _register(syn, "fgr", "--icp", "--limit", "1", "--workers", "1", "--no-progress", "--out", str(out),
+                     *args) == 0
+    assert yaml.safe_load(out.with_name("r.config.yml").read_text())["verify"] is verify
+    if not args:
+        ref = tmp_path / "on.csv"
+        assert _register(syn, "fgr", "--icp", "--limit", "1", "--workers", "1", "--no-progress", "--verify",
+                         "--out", str(ref)) == 0
+        assert _poses(out) == _poses(ref)

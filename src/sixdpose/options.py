@@ -248,6 +248,14 @@ PER_COMMAND: dict[tuple[str, str], dict] = {
                             "help": "output directory (default: next to the results, <results>_eval)"},
     ("generate", "--profile"): {"default": "demo"},
     ("register", "--profile"): {"default": "default"},
+    # register verifies by default (measured to help every method on the real sample and on data/test);
+    # --no-verify gives the unverified methods (the paper's Table rows). None: the profile's choice, on with
+    # `default`, off with `paper` (sixdpose.registration.presets.verify_by_default)
+    ("register", "--verify"): {"action": argparse.BooleanOptionalAction, "default": None,
+                               "help": "verify several pose hypotheses per instance against the frame (depth with "
+                                       "occlusion, mask overlap, texture; sixdpose.registration.hypotheses) and keep "
+                                       "the best; default: on with --profile default, off with --profile paper "
+                                       "(--no-verify: the global method [+ ICP] alone, as in the paper)"},
     ("pose-ablation", "--profile"): {"default": "cpu"},
 }
 

@@ -45,17 +45,17 @@ _PAPER_ROWS = (("ransac_icp", "RANSAC + ICP"), ("fgr_icp", "FGR + ICP"), ("super
 
 #: The methods of the graph, in table order (ours, tuned; the paper-settings reruns; the learned ones).
 METHODS: tuple[Method, ...] = (
-    Method("ransac", "RANSAC", "hybrid", "register --method ransac"),
-    Method("ransac_icp", "RANSAC + ICP", "hybrid", "register --method ransac --icp", "Ours Hybrid(RANSAC + ICP)",
-           "Ours Hybrid(RANSAC + ICP)", few=True),
-    Method("fgr", "FGR", "hybrid", "register --method fgr", None, "Ours Hybrid(FGR)"),
-    Method("fgr_icp", "FGR + ICP", "hybrid", "register --method fgr --icp", "Ours Hybrid(FGR + ICP)"),
-    Method("super4pcs", "Super4PCS", "hybrid", "register --method super4pcs", "Ours Hybrid(Super4PCS)",
+    Method("ransac", "RANSAC", "hybrid", "register --method ransac --no-verify"),
+    Method("ransac_icp", "RANSAC + ICP", "hybrid", "register --method ransac --icp --no-verify",
+           "Ours Hybrid(RANSAC + ICP)", "Ours Hybrid(RANSAC + ICP)", few=True),
+    Method("fgr", "FGR", "hybrid", "register --method fgr --no-verify", None, "Ours Hybrid(FGR)"),
+    Method("fgr_icp", "FGR + ICP", "hybrid", "register --method fgr --icp --no-verify", "Ours Hybrid(FGR + ICP)"),
+    Method("super4pcs", "Super4PCS", "hybrid", "register --method super4pcs --no-verify", "Ours Hybrid(Super4PCS)",
            "Ours Hybrid(Super4PCS)", few=True),
-    Method("super4pcs_icp", "Super4PCS + ICP", "hybrid", "register --method super4pcs --icp"),
+    Method("super4pcs_icp", "Super4PCS + ICP", "hybrid", "register --method super4pcs --icp --no-verify"),
     *(Method(f"{key}_paper", f"{label} (paper settings, rerun)", "hybrid",
              "register --method " + key.replace("_icp", "") + (" --icp" if key.endswith("_icp") else "")
-             + " --preset paper", preset="paper")
+             + " --no-verify --preset paper", preset="paper")
       for key, label in _PAPER_ROWS),
     Method("learned_it0", "learned, no refinement", "learned", "predict-pose --pose {runs}/pose --iterations 0",
            "Ours Full Learning (No Refinement)", "Ours Full Learning (No Refinement)", few=True),
@@ -135,7 +135,7 @@ REAL_METHODS: tuple[RealMethod, ...] = (
     ),
     *(
         RealMethod(f"{algo}_icp", f"{name} + ICP", "",
-                   f"register --method {algo} --icp --workers {{workers}} --min-px 0")
+                   f"register --method {algo} --icp --no-verify --workers {{workers}} --min-px 0")
         for algo, name in HYBRID_ALGORITHMS.items()
     ),
     RealMethod("super4pcs_icp_verify", "Super4PCS + ICP + verification", "",

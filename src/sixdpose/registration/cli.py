@@ -47,15 +47,17 @@ def _run(args) -> int:
     from ..artifacts.tables import write_table
     from ..datasets.readers import open_dataset
     from ..fileio import claim_output_file
-    from .presets import get_preset
+    from .presets import get_preset, verify_by_default
     from .runner import run_registration
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     overrides = parse_overrides(args.overrides)
     if args.seed is not None:
         overrides["seed"] = args.seed
-    if args.verify:
-        overrides["verify"] = True
+    if args.verify is not None:  # --verify / --no-verify win over --set verify=...
+        overrides["verify"] = args.verify
+    elif "verify" not in overrides:
+        overrides["verify"] = verify_by_default(args.profile)
     cfg = get_preset(args.profile, **overrides)
     out = Path(args.out)
     claim_output_file(out, RESULTS_HEADER)  # refuse a foreign file before any work
