@@ -8,6 +8,10 @@ resumes)::
     sixdpose predict-pose --pose RUN --data ../shared/data/ycbv_sample --split train_real --masks gt \\
         [--icp] [--colour-verify] [--verify] [--set ...] --out <work>/<label>_<variant>.csv
 
+and one more variant, pose-source fusion (:data:`MERGED`): the ``--icp --verify`` CSV and RANSAC + ICP +
+verification's (``sixdpose register ... --method ransac --icp --verify --workers 1``, once per work
+directory) merged per instance by their verification scores (``sixdpose merge-results``; its time per
+image is the sum of both, so its instances/s is the two commands' together)
 then scores the CSV on each scene of the sample alone and on both (``evaluate --scenes``; GT masks,
 ``--min-px 0``, BOP symmetric ids 1,13,14,16,18-21) and writes ``results/learned_ycbv_sample.json``:
 one row per run and variant, ``correct/GT (accuracy)`` for scene 000000, scene 000001 and both, and the
@@ -44,6 +48,10 @@ VARIANTS = [("alone", "alone", []), ("+ ICP", "icp", ["--icp"]), ("+ verify", "v
             ("+ ICP + colour search + wide verify", "icp_colour_verify_wide",
              ["--icp", "--colour-verify", "--verify", *WIDE])]
 SYMMETRIC_IDS = "1,13,14,16,18,19,20,21"
+#: the merged variant: the ``+ ICP + verify`` CSV and this hybrid method's (``register``, verified, one
+#: process) merged per instance by their verification scores (``sixdpose merge-results``)
+MERGED = ("+ ICP + verify, merged with RANSAC + ICP + verify", "icp_verify_merged_ransac", "icp_verify")
+HYBRID = ["--method", "ransac", "--icp", "--verify", "--workers", "1"]
 
 
 def _cli(*args: str) -> None:
@@ -81,10 +89,17 @@ def main() -> None:
         label, _, run = spec.partition("=")
         if not run or not Path(run, "model.pt").is_file():
             sys.exit(f"learned_ycbv_sample: --pose {spec}: expected LABEL=RUN_DIR with a model.pt")
-        for variant, suffix, switches in VARIANTS:
+        for variant, suffix, switches in [*VARIANTS, (MERGED[0], MERGED[1], None)]:
             stem = f"{label}_{suffix}"
             out = work / f"{stem}.csv"
-            if not out.is_file():
+            if switches is None:  # the merged variant (the hybrid CSV is shared by every run)
+                hybrid = work / "hybrid_ransac_icp_verify.csv"
+                if not hybrid.is_file():
+                    _cli("register", "--data", a.data, "--split", "train_real", "--masks", "gt", "--min-px", "0",
+                         "--no-progress", *HYBRID, "--out", str(hybrid))
+                _cli("merge-results", "--results", str(work / f"{label}_{MERGED[2]}.csv"), "--results", str(hybrid),
+                     "--out", str(out))
+            elif not out.is_file():
                 _cli("predict-pose", "--pose", run, "--data", a.data, "--split", "train_real", "--masks", "gt",
                      "--no-progress", "--out", str(out), *switches)
             row = {"run": label, "pose run": run, "variant": variant,

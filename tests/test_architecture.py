@@ -262,7 +262,7 @@ def test_claim_output_dir_rules(tmp_path):
 
 @pytest.mark.parametrize("command", ["generate", "export-bop", "train-seg", "segment", "register", "evaluate",
                                      "fetch-ycb", "train-pose", "train-refiner", "predict-pose", "pose-ablation",
-                                     "eval-seg"])
+                                     "eval-seg", "merge-results"])
 def test_every_writing_command_refuses_a_foreign_directory(tmp_path, command, capsys):
     from sixdpose.cli import main
     from sixdpose.segmentation.toydata import make_toy_dataset
@@ -327,6 +327,8 @@ def test_every_writing_command_refuses_a_foreign_directory(tmp_path, command, ca
             str(d / "models" / "obj_000001.ply"),
             "--no-progress",
         ],
+        "merge-results": ["merge-results", "--results", str(results), "--results", str(results), "--out",
+                          str(d / "models" / "obj_000001.ply")],
         # eval-seg writes two files into a shared directory (figures/, a run): a foreign file where its
         # directory goes is refused here; a foreign seg_ap table in it, by test_eval_seg_claims_its_tables
         "eval-seg": [

@@ -149,3 +149,51 @@ def _parse_row(row: dict, where: str) -> PoseEstimate:
     R = number_list("R", 9).reshape(3, 3)
     t = number_list("t", 3) / 1000.0
     return PoseEstimate(ids[0], ids[1], ids[2], score, R, t, number("time"))
+
+
+def merge_by_score(tables, names=None) -> tuple[list[PoseEstimate], list[int]]:
+    """Keep, for every instance, the estimate with the highest score among several results tables.
+
+    Pose-source fusion at the artifact level: tables written by ``register --verify`` and
+    ``predict-pose --verify`` on the same frames and masks carry the same verification score (depth with
+    occlusion, mask overlap, texture; :mod:`sixdpose.registration.hypotheses`), so the higher score is
+    the pose that agrees better with the frame. Both commands write one row per instance in the
+    instance order of the mask source, so the tables are paired row by row; they must list the same
+    ``(scene_id, im_id, obj_id)`` sequence. A tie keeps the earlier table's row. The merged row's
+    ``time`` is the sum of the tables' times of its image (every source ran), so frames/s stay honest.
+
+    Args:
+        tables: two or more lists of :class:`PoseEstimate` (e.g. :func:`read_results` of each CSV).
+        names: optional labels of the tables for error messages (default ``table 1``, ``table 2``...).
+    Returns:
+        ``(rows, chosen)``: the merged rows (in the tables' order) and, per table, how many rows came
+        from it.
+    Raises:
+        ResultsError: fewer than two tables, or tables of different instances (the message names the
+            first differing row).
+    """
+    tables = [list(t) for t in tables]
+    names = list(names) if names is not None else [f"table {k + 1}" for k in range(len(tables))]
+    if len(tables) < 2:
+        raise ResultsError(f"merging needs at least two results tables, got {len(tables)}")
+    first = tables[0]
+    for name, tab in zip(names[1:], tables[1:], strict=True):
+        if len(tab) != len(first):
+            raise ResultsError(f"{name}: {len(tab)} rows, {names[0]}: {len(first)}: the tables are not of the "
+                               "same instances (run both commands on the same data, split and masks)")
+        for i, (a, b) in enumerate(zip(first, tab, strict=True)):
+            ka, kb = (a.scene_id, a.im_id, a.obj_id), (b.scene_id, b.im_id, b.obj_id)
+            if ka != kb:
+                raise ResultsError(f"{name}: row {i + 1} is (scene_id, im_id, obj_id) {kb}, {names[0]} has {ka}: "
+                                   "the tables are not of the same instances")
+    # seconds per image of each table (its rows of one image share it)
+    image_time = [{(r.scene_id, r.im_id): r.time for r in tab} for tab in tables]
+    rows, chosen = [], [0] * len(tables)
+    for i in range(len(first)):
+        k = max(range(len(tables)), key=lambda j: (tables[j][i].score, -j))
+        r = tables[k][i]
+        key = (r.scene_id, r.im_id)
+        rows.append(PoseEstimate(r.scene_id, r.im_id, r.obj_id, r.score, r.R, r.t,
+                                 sum(t[key] for t in image_time), r.reason))
+        chosen[k] += 1
+    return rows, chosen

@@ -1,4 +1,5 @@
-"""``sixdpose evaluate``: ADD(-S) accuracy, BOP 2019 average recalls, ADD-S AUC and timing of a results CSV."""
+"""``sixdpose evaluate``: ADD(-S) accuracy, BOP 2019 average recalls, ADD-S AUC and timing of a results CSV;
+``sixdpose merge-results``: per instance, the best-scored row of several results CSVs."""
 
 from __future__ import annotations
 
@@ -9,7 +10,8 @@ from ..constants import ADD_THRESHOLD
 
 
 def register(sub) -> None:
-    """Add the ``evaluate`` subcommand."""
+    """Add the ``evaluate`` and ``merge-results`` subcommands."""
+    _register_merge(sub)
     p = sub.add_parser("evaluate", help="ADD(-S), BOP average recall, ADD-S AUC and FPS of a BOP results CSV",
                        description="Score a results CSV against the dataset's ground truth (paper section V-A).")
     O.add(p, "--data")
@@ -149,3 +151,33 @@ def _write_result(args, res, res_path: Path) -> None:
               "measured by the command that wrote it (register / predict-pose), not by evaluate; provenance is "
               "that of the evaluation, inputs identify the results CSV by its sha256.")
     print(f"result -> {path}")
+
+
+def _register_merge(sub) -> None:
+    p = sub.add_parser("merge-results", help="per instance, the best-scored row of several results CSVs",
+                       description="Pose-source fusion: keep, for every instance, the row with the highest score "
+                                   "among results CSVs of the same frames and masks (e.g. `register --verify` and "
+                                   "`predict-pose --icp --verify`, whose scores are the same verification's); the "
+                                   "merged row's time is the sum of the sources' times of its image.")
+    p.add_argument("--results", required=True, action="append",
+                   help="a results CSV (give two or more: --results A.csv --results B.csv)")
+    O.add(p, "--out", help="merged results CSV to write")
+    p.set_defaults(func=_run_merge)
+
+
+def _run_merge(args) -> int:
+    from ..artifacts.poses import RESULTS_HEADER, merge_by_score, read_results, write_results
+    from ..errors import UserError
+    from ..fileio import claim_output_file
+
+    if len(args.results) < 2:
+        raise UserError(f"--results: give two or more results CSVs, got {len(args.results)}")
+    out = Path(args.out)
+    claim_output_file(out, RESULTS_HEADER)  # refuse a foreign file before any work
+    tables = [read_results(r) for r in args.results]
+    rows, chosen = merge_by_score(tables, names=args.results)
+    write_results(rows, out)
+    print(f"wrote {len(rows)} rows to {out}; taken from " + ", ".join(
+        f"{name}: {n}" for name, n in zip(args.results, chosen, strict=True)))
+    return 0
+

@@ -93,6 +93,10 @@ def _orthonormalise(R: np.ndarray) -> np.ndarray:
 #: on the points sampled per instance at inference, not on the network's shapes.
 INFERENCE_FIELDS = ("num_points", "min_points")
 
+#: Smallest score of a verified pose (``predict-pose --verify`` writes the verification's score; the
+#: evaluation reads a score <= 0 as "no estimate", which a low verification score must not become).
+MIN_VERIFIED_SCORE = 1e-6
+
 
 def _verify_fields() -> tuple[str, ...]:
     """The ``verify_*`` fields of the registration stage's config (the verification's settings)."""
@@ -283,8 +287,8 @@ class Estimator:
                 R, t = run_networks(self.net, self.refiner, batch, self.iterations, self.device, amp=True)
             for inst, Ri, ti in zip(chunk, R, t, strict=True):
                 Ri = _orthonormalise(Ri)
-                Ri, ti = self._post(inst, Ri, ti, sample, items[inst.index][2])
-                rows[inst.index] = PoseEstimate(sample.scene_id, sample.im_id, inst.obj_id, inst.score, Ri, ti)
+                Ri, ti, score = self._post(inst, Ri, ti, sample, items[inst.index][2])
+                rows[inst.index] = PoseEstimate(sample.scene_id, sample.im_id, inst.obj_id, score, Ri, ti)
         dt = time.perf_counter() - t0
         for r in rows:
             r.time = dt
@@ -327,16 +331,21 @@ class Estimator:
     def _post(self, inst, R, t, sample=None, mask=None):
         """Optional ICP, colour check and hypothesis verification of one pose: the hybrid stage's
         refinement chain (:func:`sixdpose.registration.refine_pose`, ``default`` preset); ``sample`` and
-        the instance's ``mask`` are the frame of the verification."""
+        the instance's ``mask`` are the frame of the verification.
+
+        Returns ``(R, t, score)``: the score is the instance's (the detection's, 1 with GT masks) unless
+        the verification ran, whose score in (0, 1] it then is, as ``register --verify`` writes (floored
+        at :data:`MIN_VERIFIED_SCORE`, so verifying never turns a pose into "no estimate")."""
         if not (self.icp or self.colour_verify or self.verify):
-            return R, t
+            return R, t, inst.score
         from ..registration import Frame, refine_pose
 
         frame = Frame(sample.depth, sample.K, np.asarray(mask, dtype=bool), sample.rgb) if (
             self.verify and sample is not None and mask is not None) else None
         r = refine_pose(X_from(R, t), inst.points, inst.obj_id, self._cache, self.reg_cfg, icp=self.icp,
                         colour_verify=self.colour_verify, colors=inst.colors, frame=frame)
-        return r.X_CO[:3, :3], r.X_CO[:3, 3]
+        score = max(float(r.score), MIN_VERIFIED_SCORE) if frame is not None else inst.score
+        return r.X_CO[:3, :3], r.X_CO[:3, 3], score
 
 
 def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: int | None = None,
