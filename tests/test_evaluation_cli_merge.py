@@ -46,3 +46,23 @@ def test_merge_refuses_tables_of_other_instances(tmp_path, capsys):
     assert "two or more" in capsys.readouterr().err
     assert main(["merge-results", "--results", str(pa), "--results", str(tmp_path / "no.csv"), "--out", str(out)]) == 2
     assert "no.csv" in capsys.readouterr().err and not out.exists()
+
+
+def test_merge_warns_when_the_scores_are_not_the_same_verifications(tmp_path, capsys):
+    """The sources' ``.config.yml``: a source made without ``--verify``, or verified with other
+    ``verify_*`` settings, is named in a warning line (its scores mean something else); the merge runs."""
+    a = [_row(0, 1, 5, 0.9, 0.0, 1.0)]
+    paths = [tmp_path / f"{n}.csv" for n in ("reg", "net", "wide", "plain")]
+    for p in paths:
+        write_results(a, p)
+    (tmp_path / "reg.config.yml").write_text("verify: true\nverify_tau_rel: 0.03\nseed: 0\n")  # register's layout
+    (tmp_path / "net.config.yml").write_text("verify: true\nverify_config:\n  verify_tau_rel: 0.03\n")  # predict-pose's
+    (tmp_path / "wide.config.yml").write_text("verify: true\nverify_config:\n  verify_tau_rel: 0.05\n")
+    (tmp_path / "plain.config.yml").write_text("verify: false\nicp: true\n")
+    out = tmp_path / "m.csv"
+    assert main(["merge-results", "--results", str(paths[0]), "--results", str(paths[1]), "--out", str(out)]) == 0
+    assert "warning" not in capsys.readouterr().err  # the same verification: no warning
+    for other, text in ((paths[2], "verify_tau_rel=0.05"), (paths[3], "not made with the hypothesis verification")):
+        assert main(["merge-results", "--results", str(paths[0]), "--results", str(other), "--out", str(out)]) == 0
+        err = capsys.readouterr().err
+        assert text in err and str(other) in err and out.is_file()

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from .. import options as O
@@ -176,8 +177,45 @@ def _run_merge(args) -> int:
     claim_output_file(out, RESULTS_HEADER)  # refuse a foreign file before any work
     tables = [read_results(r) for r in args.results]
     rows, chosen = merge_by_score(tables, names=args.results)
+    for line in _verification_mismatch(args.results):
+        print(f"sixdpose merge-results: warning: {line}", file=sys.stderr, flush=True)
     write_results(rows, out)
     print(f"wrote {len(rows)} rows to {out}; taken from " + ", ".join(
         f"{name}: {n}" for name, n in zip(args.results, chosen, strict=True)))
     return 0
+
+
+def _verification_of(csv_path: str) -> dict | None:
+    """The hypothesis-verification settings a results CSV was made with, from its ``<stem>.config.yml``
+    (``register``: the ``verify`` and ``verify_*`` fields; ``predict-pose``: ``verify`` and
+    ``verify_config``); ``{}`` when it was not verified, None when there is no readable config."""
+    import yaml
+
+    cfg_path = Path(csv_path).with_name(Path(csv_path).stem + ".config.yml")
+    try:
+        cfg = yaml.safe_load(cfg_path.read_text())
+    except (OSError, yaml.YAMLError):
+        return None
+    if not isinstance(cfg, dict):
+        return None
+    if not cfg.get("verify"):
+        return {}
+    nested = cfg.get("verify_config")
+    fields: dict = nested if isinstance(nested, dict) else cfg
+    return {k: v for k, v in fields.items() if str(k).startswith("verify_")}
+
+
+def _verification_mismatch(paths) -> list[str]:
+    """Warnings when the results CSVs' scores are not the same verification's (a source not verified, or
+    verified with other ``verify_*`` settings): merging by score then compares unlike scores."""
+    found = [(p, _verification_of(p)) for p in paths]
+    out = [f"{p}: not made with the hypothesis verification (--verify): its scores are not comparable"
+           for p, v in found if v == {}]
+    ref = next(((p, v) for p, v in found if v), None)
+    for p, v in found:
+        if ref is not None and v and v != ref[1]:
+            k = sorted(key for key in set(v) | set(ref[1]) if v.get(key) != ref[1].get(key))[0]
+            out.append(f"{p}: verified with {k}={v.get(k)!r}, {ref[0]} with {ref[1].get(k)!r}: the scores differ in "
+                       "meaning")
+    return out
 
