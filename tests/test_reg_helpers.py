@@ -130,3 +130,8 @@ def write_synthetic_dataset(root: Path, n_images: int = 3, two_instances_in_firs
     models = {name: {"obj_id": oid, "diameter": diam, "symmetric": False, "points": P, "normals": N, "colors": C}}
     root = write_dataset(root, images, models, {"generator": "tests.test_reg_helpers"})
     return root
+
+
+def results_without_time(path: Path) -> list[str]:
+    """The results CSV's lines without the last column (``time``): two runs' estimates, times aside."""
+    return [line.rsplit(",", 1)[0] for line in Path(path).read_text().splitlines()]

@@ -16,7 +16,7 @@ from sixdpose.registration.geometry import ReferenceCache, backproject
 from sixdpose.registration.methods import estimate_pose
 from sixdpose.registration.presets import PRESETS, get_preset
 from sixdpose.registration.runner import run_registration
-from test_reg_helpers import YCBV, write_synthetic_dataset
+from test_reg_helpers import YCBV, results_without_time, write_synthetic_dataset
 
 needs_ycbv = pytest.mark.skipif(not YCBV.is_dir(), reason="shared/data/ycbv_sample not available")
 
@@ -328,12 +328,6 @@ def test_verify_retries_a_poorly_fitting_pose_and_keeps_the_best():
     assert get_preset("default").verify_retry_below > 0  # on by default with --verify
 
 
-def _poses(path) -> list[tuple]:
-    """(scene_id, im_id, obj_id, R, t) of every row of a results CSV: the estimates, times aside."""
-    with open(path, newline="") as f:
-        return [(r["scene_id"], r["im_id"], r["obj_id"], r["R"], r["t"]) for r in csv.DictReader(f)]
-
-
 @pytest.mark.parametrize("args, verify", [
     ([], True),  # the default profile verifies ...
     (["--no-verify"], False),  # ... unless told not to
@@ -356,4 +350,4 @@ def test_register_verifies_by_default(syn, tmp_path, args, verify):
         ref = tmp_path / "on.csv"
         assert _register(syn, "fgr", "--icp", "--limit", "1", "--workers", "1", "--no-progress", "--verify",
                          "--out", str(ref)) == 0
-        assert _poses(out) == _poses(ref)
+        assert results_without_time(out) == results_without_time(ref)

@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from sixdpose.cli import main
-from test_reg_helpers import YCBV, write_synthetic_dataset
+from test_reg_helpers import YCBV, results_without_time, write_synthetic_dataset
 
 REPO = Path(__file__).resolve().parents[1]
 needs_ycbv = pytest.mark.skipif(not YCBV.is_dir(), reason="shared/data/ycbv_sample not available")
@@ -37,11 +37,6 @@ def _sigint_ignored(pid: int) -> bool:
     except OSError:
         pass
     return False
-
-
-def _without_time(path: Path) -> list[str]:
-    """The results CSV's lines without the last column (``time``)."""
-    return [line.rsplit(",", 1)[0] for line in path.read_text().splitlines()]
 
 
 def _session(sid: int) -> list[tuple[int, str]]:
@@ -131,9 +126,9 @@ def test_same_seed_same_results_any_workers_any_load(method, tmp_path):
         for p in busy:
             p.kill()
             p.wait()
-    rows_a = _without_time(a)
+    rows_a = results_without_time(a)
     assert len(rows_a) == 1 + 7  # header + frames 0 and 20: 3 + 4 instances
-    assert rows_a == _without_time(b)
+    assert rows_a == results_without_time(b)
     assert yaml.safe_load((tmp_path / "a.config.yml").read_text())["seed"] == 7
 
 

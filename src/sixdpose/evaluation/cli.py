@@ -218,4 +218,3 @@ def _verification_mismatch(paths) -> list[str]:
             out.append(f"{p}: verified with {k}={v.get(k)!r}, {ref[0]} with {ref[1].get(k)!r}: the scores differ in "
                        "meaning")
     return out
-
