@@ -311,3 +311,124 @@ def test_the_decoupled_loss_gives_every_point_the_full_coordinate_gradient():
     assert torch.allclose(grads["densefusion"][1], grads["decoupled"][1])  # the same confidence gradient
     with pytest.raises(ValueError, match="dense loss mode"):
         dense_loss(target[:, 0], logit, target, mode="l2")
+
+
+# ---------------------------------------------------------------- shape flips
+def _box_model(symmetric: bool = False):
+    from sixdpose.datasets.base import ObjectModel
+
+    rng = np.random.default_rng(3)
+    box = rng.uniform(-1, 1, size=(6000, 3))
+    face = rng.integers(0, 3, 6000)
+    box[np.arange(6000), face] = np.sign(box[np.arange(6000), face])
+    box = box * [0.05, 0.03, 0.01] + [0.01, 0.0, 0.02]  # off-origin: the turns have translations
+    return ObjectModel("box", 2, box, np.zeros_like(box), np.zeros_like(box), 0.12, symmetric)
+
+
+def test_shape_flips_canonical_turn_and_unflip_recover_the_pose():
+    """A box flagged asymmetric has 4 shape flips; every equivalent pose names the same canonical pose; the
+    canonical coordinates fitted back to the cloud and unflipped give the true pose."""
+    from sixdpose.pose.dense import canonical_flip, shape_flips, unflip
+
+    model = _box_model()
+    fl = shape_flips(model, 8)
+    assert len(fl.R) == 4 and np.allclose(fl.R[0], np.eye(3)) and fl.axis is None
+    assert len(shape_flips(model, 2).R) == 2 and shape_flips(_box_model(symmetric=True), 8).trivial
+    with pytest.raises(ValueError, match="max_flips"):
+        shape_flips(model, 0)
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        R, t = Rotation.random(random_state=rng).as_matrix(), np.array([0.02, -0.01, 0.6])
+        d = canonical_flip(R, fl)
+        canon, canon_t = R @ fl.R[d], R @ fl.t[d] + t
+        for e in range(4):  # the same object seen under an equivalent pose X S_e: the same canonical pose
+            Re, te = R @ fl.R[e], R @ fl.t[e] + t
+            de = canonical_flip(Re, fl)
+            assert np.allclose(Re @ fl.R[de], canon, atol=1e-6) and np.allclose(Re @ fl.t[de] + te, canon_t, atol=1e-6)
+        cloud = model.points[:300] @ R.T + t
+        y = coordinate_targets(cloud, R, t, fl)[d]
+        Rc, tc = weighted_kabsch(y, cloud)  # the fit of the canonical coordinates: X S_d
+        assert np.allclose(Rc, canon, atol=1e-6)
+        Rb, tb = unflip(Rc, tc, fl.R[d], fl.t[d])
+        assert np.allclose(Rb, R, atol=1e-6) and np.allclose(tb, t, atol=1e-6)
+    # a can (closed cylinder along y) flagged asymmetric: the identity and one half turn, the axis kept; the
+    # canonical turn's axis is the same under every turn about the axis and upside down
+    from sixdpose.datasets.base import ObjectModel
+
+    n = 4000
+    ang, h = rng.uniform(0, 2 * math.pi, n), rng.uniform(-0.05, 0.05, n)
+    side = np.stack([0.03 * np.cos(ang), h, 0.03 * np.sin(ang)], 1)
+    r, a2 = 0.03 * np.sqrt(rng.uniform(0, 1, n // 2)), rng.uniform(0, 2 * math.pi, n // 2)
+    caps = np.stack([r * np.cos(a2), np.where(rng.random(n // 2) < 0.5, -0.05, 0.05), r * np.sin(a2)], 1)
+    can = ObjectModel("can", 3, np.concatenate([side, caps]), np.zeros((2 * n, 3)), np.zeros((2 * n, 3)), 0.117, False)
+    fc = shape_flips(can, 8)
+    assert len(fc.R) == 2 and fc.axis is not None and abs(abs(fc.axis[1]) - 1) < 1e-2
+    for _ in range(10):
+        R = Rotation.random(random_state=rng).as_matrix()
+        axis = R @ fc.R[canonical_flip(R, fc)] @ fc.axis
+        for phi, e in ((0.7, 0), (2.0, 1), (-1.2, 1)):
+            Re = R @ rotation_about(fc.axis, phi) @ fc.R[e]
+            assert np.allclose(Re @ fc.R[canonical_flip(Re, fc)] @ fc.axis, axis, atol=1e-6)
+
+
+def test_flip_classifier_outputs_and_loss():
+    from sixdpose.pose.config import PoseConfig
+    from sixdpose.pose.dense import flip_loss
+    from sixdpose.pose.model import PoseNet
+
+    net = PoseNet(2, width=1 / 16, head="dense", flips=3)
+    with pytest.raises(ValueError, match="room for 1 to 3"):
+        net.set_flips({0: (np.eye(3)[None].repeat(4, 0), np.zeros((4, 3)))})
+    net.set_flips({1: (np.eye(3)[None].repeat(2, 0), np.zeros((2, 3)))})
+    out = net(torch.rand(2, 3, 32, 32), torch.tensor([0, 1]), torch.zeros(2, 16, dtype=torch.long),
+              torch.rand(2, 16, 3), torch.tensor([0, 1]))
+    lg = out["flip_logit"]
+    assert lg.shape == (2, 3) and torch.isinf(lg[0, 1:]).all() and torch.isfinite(lg[1, :2]).all()
+    assert torch.isinf(lg[1, 2])
+    loss = flip_loss(lg, torch.tensor([0, 1]))
+    assert loss[0] == 0 and loss[1] > 0  # a class with one turn has nothing to classify
+    assert flip_loss(torch.tensor([[10.0, -10.0]]), torch.tensor([0]))[0] < 1e-6
+    assert "flip_logit" not in PoseNet(2, width=1 / 16, head="dense")(
+        torch.rand(1, 3, 32, 32), torch.tensor([0]), torch.zeros(1, 16, dtype=torch.long), torch.rand(1, 16, 3),
+        torch.tensor([0]))
+    with pytest.raises(ValueError, match="flips needs head=dense"):
+        PoseConfig(flips=4).validate()
+    assert PoseConfig(head="dense", flips=4).arch()["flips"] == 4 and "flips" not in PoseConfig(head="dense").arch()
+
+
+def test_training_with_flips_stores_them_and_predict_pose_applies_them(tmp_path):
+    """A box flagged asymmetric: a run with flips=4 keeps the box's 4 turns in its weights and predict-pose
+    writes proper poses on the cloud."""
+    from scipy.spatial.transform import Rotation as Rot
+
+    from sixdpose.artifacts.poses import read_results
+    from sixdpose.datasets.layout import write_dataset
+    from sixdpose.pose.train import train_pose
+    from test_reg_helpers import _box_surface
+
+    rng = np.random.default_rng(0)
+    P, N = _box_surface((-0.05, -0.03, -0.015), (0.05, 0.03, 0.015), 0.002, rng)
+    images = []
+    for im in range(2):
+        R, t = Rot.from_rotvec(rng.normal(size=3) * 0.4).as_matrix(), np.array([0.0, 0.0, 0.55])
+        depth, label = render_depth([(P, N, R, t)])
+        rgb = np.zeros((H_SMALL, W_SMALL, 3), np.uint8)
+        rgb[label >= 0] = (200, 120, 40)
+        images.append({"im_id": im, "scene_id": 0, "K": K_SMALL, "rgb": rgb, "depth": depth,
+                       "instances": [{"obj_name": "035_power_drill", "obj_id": 2, "inst": 0, "R": R, "t": t,
+                                      "mask": label == 0}]})
+    models = {"035_power_drill": {"obj_id": 2, "diameter": 0.12, "symmetric": False, "points": P, "normals": N,
+                                  "colors": np.full_like(P, 0.5)}}
+    ds = write_dataset(tmp_path / "box", images, models, {"generator": "tests.test_dense"})
+    train_pose(ds, tmp_path / "r", profile="smoke", progress=False, **dict(DENSE, flips=4))
+    ckpt = ck.load(tmp_path / "r" / ck.LAST)
+    assert ckpt["arch"]["flips"] == 4 and int(ckpt["model"]["flip_n"][0]) == 4
+    assert np.allclose(ckpt["model"]["flip_R"][0, 0].numpy(), np.eye(3))
+    out = tmp_path / "res.csv"
+    assert main(["predict-pose", "--data", str(ds), "--pose", str(tmp_path / "r"), "--out", str(out),
+                 "--no-progress"]) == 0
+    rows = read_results(out)
+    assert len(rows) == 2 and all(r.score > 0 for r in rows)
+    for r in rows:
+        assert np.allclose(r.R @ r.R.T, np.eye(3), atol=1e-6) and np.linalg.det(r.R) > 0
+        assert 0.4 < r.t[2] < 0.7

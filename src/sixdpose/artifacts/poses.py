@@ -10,6 +10,9 @@ read by ``sixdpose evaluate``. Format (BOP challenge, https://bop.felk.cvut.cz/c
 disk reads), repeated on each row of the image. In memory translations are metres. An instance whose
 input was unusable has score 0 (identity pose); its ``reason`` is kept in memory and logged, not
 written (the BOP format has no column for it).
+
+Beside every results CSV the command that wrote it saves its settings, ``<stem>.config.yml``
+(:func:`results_config_path`; read by :func:`read_results_config`).
 """
 
 from __future__ import annotations
@@ -26,6 +29,38 @@ from ..geometry import X_from
 
 #: First line of every results CSV.
 RESULTS_HEADER = "scene_id,im_id,obj_id,score,R,t,time"
+
+
+def results_config_path(path: str | Path) -> Path:
+    """The settings file of a results CSV: ``<dir>/<stem>.config.yml`` (written by ``register`` and
+    ``predict-pose`` beside the CSV)."""
+    path = Path(path)
+    return path.with_name(path.stem + ".config.yml")
+
+
+def read_results_config(path: str | Path) -> dict | None:
+    """The settings a results CSV was made with (its :func:`results_config_path`), or None when that file is
+    missing, unreadable or not a YAML mapping."""
+    import yaml
+
+    try:
+        cfg = yaml.safe_load(results_config_path(path).read_text())
+    except (OSError, yaml.YAMLError, UnicodeDecodeError):
+        return None
+    return cfg if isinstance(cfg, dict) else None
+
+
+def results_verification(cfg: dict | None) -> dict | None:
+    """The hypothesis-verification settings of a results CSV's config (:func:`read_results_config`):
+    ``register`` keeps ``verify`` and the ``verify_*`` fields flat, ``predict-pose`` ``verify`` and a nested
+    ``verify_config``. Returns the ``verify_*`` fields, ``{}`` when not verified, None without a config."""
+    if cfg is None:
+        return None
+    if not cfg.get("verify"):
+        return {}
+    nested = cfg.get("verify_config")
+    fields: dict = nested if isinstance(nested, dict) else cfg
+    return {k: v for k, v in fields.items() if str(k).startswith("verify_")}
 
 
 class ResultsError(SixdposeError):

@@ -122,20 +122,16 @@ def _scene_images(text: str, keys, location) -> list:
 def _write_result(args, res, res_path: Path) -> None:
     """The evaluation as a result artifact: summary figures, per-object rows, the evaluation options and
     the configuration of the command that wrote the results CSV (``<results>.config.yml``, if present)."""
-    import yaml
-
+    from ..artifacts.poses import read_results_config, results_config_path
     from ..artifacts.results import file_input, write_result
     from .evaluate import UNITS, table_rows
 
-    producer = res_path.with_suffix(".config.yml")
+    producer = results_config_path(res_path)
     inputs = [file_input(res_path)]
     producer_cfg = None
     if producer.is_file():
         inputs.append(file_input(producer))
-        try:
-            producer_cfg = yaml.safe_load(producer.read_text())
-        except (OSError, yaml.YAMLError):
-            producer_cfg = None
+        producer_cfg = read_results_config(res_path)
     label = args.label or res_path.stem
     path = write_result(
         args.result_name, dict(res.summary(), label=label), rows=table_rows(res), units=UNITS,
@@ -185,30 +181,12 @@ def _run_merge(args) -> int:
     return 0
 
 
-def _verification_of(csv_path: str) -> dict | None:
-    """The hypothesis-verification settings a results CSV was made with, from its ``<stem>.config.yml``
-    (``register``: the ``verify`` and ``verify_*`` fields; ``predict-pose``: ``verify`` and
-    ``verify_config``); ``{}`` when it was not verified, None when there is no readable config."""
-    import yaml
-
-    cfg_path = Path(csv_path).with_name(Path(csv_path).stem + ".config.yml")
-    try:
-        cfg = yaml.safe_load(cfg_path.read_text())
-    except (OSError, yaml.YAMLError):
-        return None
-    if not isinstance(cfg, dict):
-        return None
-    if not cfg.get("verify"):
-        return {}
-    nested = cfg.get("verify_config")
-    fields: dict = nested if isinstance(nested, dict) else cfg
-    return {k: v for k, v in fields.items() if str(k).startswith("verify_")}
-
-
 def _verification_mismatch(paths) -> list[str]:
     """Warnings when the results CSVs' scores are not the same verification's (a source not verified, or
     verified with other ``verify_*`` settings): merging by score then compares unlike scores."""
-    found = [(p, _verification_of(p)) for p in paths]
+    from ..artifacts.poses import read_results_config, results_verification
+
+    found = [(p, results_verification(read_results_config(p))) for p in paths]
     out = [f"{p}: not made with the hypothesis verification (--verify): its scores are not comparable"
            for p, v in found if v == {}]
     ref = next(((p, v) for p, v in found if v), None)

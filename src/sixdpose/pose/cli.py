@@ -70,7 +70,7 @@ def _cmd_train_refiner(args) -> int:
 def _cmd_predict(args) -> int:
     import yaml
 
-    from ..artifacts.poses import RESULTS_HEADER, write_results
+    from ..artifacts.poses import RESULTS_HEADER, results_config_path, write_results
     from ..fileio import atomic_write_text, claim_output_file
     from .infer import check_inference_overrides, predict_dataset
 
@@ -97,7 +97,7 @@ def _cmd_predict(args) -> int:
     )
     write_results(rows, out)
     settings = dict(est.settings(), data=str(args.data), masks=args.masks, split=args.split, limit=args.limit)
-    atomic_write_text(out.with_name(out.stem + ".config.yml"), yaml.safe_dump(settings, sort_keys=True))
+    atomic_write_text(results_config_path(out), yaml.safe_dump(settings, sort_keys=True))
     failed = sum(1 for r in rows if r.score == 0)
     times = {(r.scene_id, r.im_id): r.time for r in rows}
     fps = len(times) / sum(times.values()) if times and sum(times.values()) > 0 else float("nan")

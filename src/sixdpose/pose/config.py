@@ -86,6 +86,14 @@ class PoseConfig(FrameSchedule):
             distances detached; :func:`~sixdpose.pose.dense.dense_loss`).
         ransac_threshold: inlier distance (metres) of the dense head's robust fit at inference.
         ransac_iterations: hypotheses of that fit.
+        flips: the dense head's shape flips (0: none, the first dense recipe). N > 0: for every class flagged
+            asymmetric whose shape is symmetric (a box turned by 180 degrees, a can upside down: the turns
+            that only texture tells apart, :func:`~sixdpose.pose.dense.shape_flips`, at most N of them, the
+            identity included), the coordinates are regressed in the frame of one canonical turn (a function
+            of what the image shows, so learnable from geometry) and a per-point classifier, averaged over the
+            points, names which turn is the true pose (cross-entropy weighted by ``flip_weight``); inference
+            fits the canonical frame and applies the classified turn.
+        flip_weight: weight of that classification loss beside the coordinate loss (metres).
 
     Data:
         num_points: masked pixels with valid depth sampled per instance (fewer: wrapped repeats).
@@ -128,6 +136,8 @@ class PoseConfig(FrameSchedule):
     dense_loss: str = "densefusion"
     ransac_threshold: float = bounded(0.015, min=0, max=1, min_open=True)
     ransac_iterations: int = bounded(128, min=1, max=100_000)
+    flips: int = bounded(0, min=0, max=64)
+    flip_weight: float = bounded(0.1, min=0, max=100)
     rgb_noise: float = bounded(0.3, min=0, max=1)
     colour_jitter: float = bounded(0.0, min=0, max=1, max_open=True)
     mask_jitter_px: int = bounded(0, min=0, max=64)
@@ -153,6 +163,8 @@ class PoseConfig(FrameSchedule):
             raise ValueError(f"head must be one of {HEADS}, got {self.head!r}")
         if self.dense_loss not in DENSE_LOSSES:
             raise ValueError(f"dense_loss must be one of {DENSE_LOSSES}, got {self.dense_loss!r}")
+        if self.flips and self.head != "dense":
+            raise ValueError(f"flips needs head=dense, got head={self.head!r}")
         if not self.ransac_threshold > 0 or self.ransac_iterations < 1:
             raise ValueError("ransac_threshold must be > 0 and ransac_iterations >= 1")
         if self.emb_dim < 1 or self.rgb_noise < 0:
@@ -165,6 +177,8 @@ class PoseConfig(FrameSchedule):
         arch = {k: getattr(self, k) for k in ("width", "emb_dim", "crop", "translation", "rotation", "norm")}
         if self.head != "paper":  # the paper head's arch is unchanged (checkpoints from before the field)
             arch["head"] = self.head
+        if self.flips:  # likewise the dense head's without flips
+            arch["flips"] = self.flips
         return arch
 
 

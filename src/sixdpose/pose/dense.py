@@ -22,6 +22,14 @@ Objects flagged symmetric without a BOP annotation (the synthetic layout only ha
 get their symmetries from the model's shape (:func:`discover_symmetries`): rotations about its principal
 axes that map the model points onto themselves within 2 % of the diameter.
 
+Shape flips (``PoseConfig.flips > 0``): an object flagged asymmetric can still have a symmetric shape
+(a box turned by 180 degrees, a can upside down); its turns are told apart by texture alone, and a coordinate
+regression asked for the one true set of coordinates under such a turn learns it slowly (the boxes of the
+first dense recipe came out turned). :func:`shape_flips` finds those turns (the shape's discrete symmetries);
+the coordinates are then regressed in the frame of one canonical turn, chosen by :func:`canonical_flip` from
+the pose alone (so a function of what the image shows, learnable from geometry), and a classifier names the
+turn (:func:`flip_loss`); :func:`unflip` maps the fitted canonical pose back.
+
 Loss (DenseFusion, Wang et al. 2019): ``mean_i (d_i c_i - w log c_i)`` with ``d_i = ||y^_i - y_i||``
 (metres) and ``w = 0.015`` (:func:`dense_loss`, ``mode="densefusion"``). Its gradient on a point's
 coordinates is scaled by that point's confidence, which settles near ``w / d_i``: the points that are
@@ -156,6 +164,72 @@ def model_symmetry(model) -> Symmetry:
     if model.symmetric:
         return discover_symmetries(model.points, float(model.diameter))
     return Symmetry.none()
+
+
+def _closed(R: np.ndarray, tol: float = 1e-3) -> bool:
+    """Whether the rotations R (K, 3, 3) are closed under composition (a group)."""
+    return all(np.abs(R - a @ b).reshape(len(R), -1).max(axis=1).min() < tol for a in R for b in R)
+
+
+def shape_flips(model, max_flips: int) -> Symmetry:
+    """The shape flips of an object model flagged asymmetric: its shape's discrete symmetries
+    (:func:`discover_symmetries`), the identity first, at most ``max_flips`` of them and closed under
+    composition (the longest closed prefix). A shape with a continuous axis (a can) keeps the identity and one
+    half turn (upside down), and carries the axis (``axis``, ``offset``) for :func:`canonical_flip`; the turn
+    about the axis is left to the coordinate regression. An object with symmetries of its own (BOP annotation
+    or ``symmetric`` flag) has none: its targets already cover them.
+
+    Args:
+        model: :class:`~sixdpose.datasets.base.ObjectModel` (points metres, diameter metres).
+        max_flips: the most turns kept (>= 1).
+    Returns:
+        a :class:`Symmetry` whose discrete elements are the flips (the identity alone when there are none).
+    """
+    if max_flips < 1:
+        raise ValueError(f"max_flips must be >= 1, got {max_flips}")
+    if model.symmetric or model.symmetries:
+        return Symmetry.none()
+    g = discover_symmetries(model.points, float(model.diameter))
+    k = min(len(g.R), max_flips, 2 if g.axis is not None else len(g.R))
+    while k > 1 and not _closed(g.R[:k]):
+        k -= 1
+    return Symmetry(g.R[:k], g.t[:k], g.axis if k > 1 else None, g.offset if k > 1 else None)
+
+
+#: Reference direction (camera frame) of :func:`canonical_flip` for shapes with a continuous axis.
+_AXIS_REF = np.array([0.3, -0.8, -0.5]) / np.linalg.norm([0.3, -0.8, -0.5])
+
+
+def canonical_flip(R: np.ndarray, flips: Symmetry) -> int:
+    """Index of the canonical turn of a pose, the same for every equivalent pose of the shape (up to ties), so
+    a function of what the image shows: the flip ``S_d`` whose pose ``X S_d`` has the rotation closest to the
+    camera's axes (largest ``trace(R R_d)``); for a shape with a continuous axis ``a``, the one whose axis
+    ``R R_d a`` points most along a fixed camera-frame direction (``_AXIS_REF``).
+
+    Args:
+        R: (3, 3) rotation of ``X_CO``. flips: the object's :func:`shape_flips`.
+    Returns:
+        d in ``range(len(flips.R))``.
+    """
+    R = np.asarray(R, float)
+    if flips.axis is not None:
+        return int(np.argmax((R @ flips.R @ flips.axis) @ _AXIS_REF))
+    return int(np.argmax(np.einsum("ij,dji->d", R, flips.R)))
+
+
+def unflip(R: np.ndarray, t: np.ndarray, Rd: np.ndarray, td: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pose ``X`` from the pose of its turn ``X S_d`` (``S_d = (Rd, td)``, ``x -> Rd x + td``, metres):
+    ``X = (X S_d) S_d^-1``. Returns ``(R (3, 3), t (3,))``."""
+    R2 = np.asarray(R, float) @ np.asarray(Rd, float).T
+    return R2, np.asarray(t, float) - R2 @ np.asarray(td, float)
+
+
+def flip_loss(logits: torch.Tensor, labels: torch.Tensor) -> torch.Tensor:
+    """Per-instance cross-entropy of the flip classifier: logits (N, F) (-inf past a class's count),
+    labels (N,) long. Instances whose class has a single turn get 0. Returns (N,)."""
+    several = torch.isfinite(logits).sum(dim=1) > 1
+    ce = F.cross_entropy(logits.masked_fill(~torch.isfinite(logits), -1e4), labels, reduction="none")
+    return torch.where(several, ce, torch.zeros_like(ce))
 
 
 def coordinate_targets(cloud: np.ndarray, R: np.ndarray, t: np.ndarray, sym: Symmetry) -> np.ndarray:

@@ -300,7 +300,7 @@ class Estimator:
         """Poses of a dense-head batch: per-point object coordinates and confidences from the network, then
         :func:`~sixdpose.pose.dense.ransac_kabsch` of the coordinates onto each instance's sampled cloud.
         Returns ``(R (N, 3, 3), t (N, 3))`` float64, ``X_CO`` in metres."""
-        from .dense import ransac_kabsch
+        from .dense import ransac_kabsch, unflip
 
         dev = self.device
         with torch.no_grad(), torch.autocast("cuda", dtype=torch.float16, enabled=dev.type == "cuda"):
@@ -308,10 +308,16 @@ class Estimator:
                            batch["cloud"].to(dev), batch["obj_index"].to(dev))
         coords = out["coords"].float().cpu().double().numpy()
         conf = torch.sigmoid(out["conf_logit"].float()).cpu().double().numpy()
+        flip = (out["flip_logit"].float().argmax(dim=1).cpu().numpy() if "flip_logit" in out
+                else np.zeros(len(insts), int))
         Rs, ts = [], []
-        for inst, y, c in zip(insts, coords, conf, strict=True):
+        for k, (inst, y, c) in enumerate(zip(insts, coords, conf, strict=True)):
             R, t, _ = ransac_kabsch(y, inst.cloud, c, threshold=self.cfg.ransac_threshold,
                                     iterations=self.cfg.ransac_iterations, rng=rng)
+            if flip[k]:  # the coordinates are the canonical turn's: back to the classified turn
+                ci = int(batch["obj_index"][k])
+                R, t = unflip(R, t, self.net.flip_R[ci, flip[k]].double().cpu().numpy(),
+                              self.net.flip_t[ci, flip[k]].double().cpu().numpy())
             Rs.append(R)
             ts.append(t)
         return np.stack(Rs), np.stack(ts)

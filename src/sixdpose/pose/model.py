@@ -15,7 +15,8 @@ Shapes (``w`` = width multiplier, ``c(x) = max(1, round(x * w))``; ``w = 1`` is 
   per-class linear output: rotation (quaternion 4 or 6D 6) and translation (3). The ``dense`` head
   (the project's own, :mod:`sixdpose.pose.dense`) replaces both heads by one 1408->640->256->128 per-point
   branch and a per-class 1x1 conv to 4 per point: object coordinates (offsets from the class's model-box
-  centre in units of ``OFFSET_SCALE``, the cloud centred and in the same units) and a confidence logit.
+  centre in units of ``OFFSET_SCALE``, the cloud centred and in the same units) and a confidence logit,
+  plus, with ``flips = F > 0``, F per-point logits of the class's shape flips (averaged over the points).
 * :class:`Refiner`: object-frame cloud (N, P, 3) (fed in units of ``OFFSET_SCALE`` = 5 cm, its
   translation output in the same units: a change of units from the authors' metres, so that the
   point features are not swamped by the biases of a from-scratch network) + detached embedding (N, emb_dim, P): geometry
@@ -181,10 +182,15 @@ class PoseNet(nn.Module):
             ``rotation`` and ``translation`` are then unused).
     """
 
+    flip_R: torch.Tensor
+    flip_t: torch.Tensor
+    flip_n: torch.Tensor
+
     def __init__(self, num_classes: int, width: float = 1.0, emb_dim: int = 32, norm: str = "none",
-                 rotation: str = "quaternion", translation: str = "absolute", head: str = "paper"):
+                 rotation: str = "quaternion", translation: str = "absolute", head: str = "paper", flips: int = 0):
         super().__init__()
         self.num_classes, self.rotation, self.translation, self.head = num_classes, rotation, translation, head
+        self.flips = flips if head == "dense" else 0
         self.cnn = PSPNet(width, emb_dim, norm)
         c = lambda x: _ch(x, width)  # noqa: E731
         self.conv1, self.conv2 = _conv1d(3, c(64), norm), _conv1d(c(64), c(128), norm)
@@ -198,7 +204,11 @@ class PoseNet(nn.Module):
 
         if self.head == "dense":  # per point: object coordinates (3) and a confidence logit, per class
             self.head_d = make_head()
-            self.out_d = nn.Conv1d(c(128), num_classes * 4, 1)
+            self.out_d = nn.Conv1d(c(128), num_classes * (4 + self.flips), 1)
+            if self.flips:  # each class's shape flips (set_flips): (C, F, 3, 3), (C, F, 3) metres, (C,) count
+                self.register_buffer("flip_R", torch.eye(3).repeat(num_classes, self.flips, 1, 1))
+                self.register_buffer("flip_t", torch.zeros(num_classes, self.flips, 3))
+                self.register_buffer("flip_n", torch.ones(num_classes, dtype=torch.long))
         else:
             self.head_r, self.head_t = make_head(), make_head()
             self.att_r, self.att_t = AttentionPool(c(128)), AttentionPool(c(128))
@@ -220,6 +230,17 @@ class PoseNet(nn.Module):
     def set_centres(self, centres) -> None:
         """Set the per-class model-box centres, (num_classes, 3) metres in the object frames (saved in the state)."""
         self.centres.copy_(torch.as_tensor(centres, dtype=self.centres.dtype))
+
+    def set_flips(self, flips: dict[int, tuple]) -> None:
+        """Set the classes' shape flips: ``{class index: (R (K, 3, 3), t (K, 3) metres)}``, the identity first,
+        ``K <= flips`` (classes not given keep the identity alone); saved in the state."""
+        for k, (R, t) in flips.items():
+            R, t = torch.as_tensor(R, dtype=torch.float32), torch.as_tensor(t, dtype=torch.float32)
+            if not 1 <= len(R) <= self.flips:
+                raise ValueError(f"class {k}: {len(R)} flips, the network has room for 1 to {self.flips}")
+            self.flip_R[k, : len(R)] = R
+            self.flip_t[k, : len(R)] = t
+            self.flip_n[k] = len(R)
 
     def embed(self, images: torch.Tensor, img_index: torch.Tensor, choose: torch.Tensor) -> torch.Tensor:
         """Per-point colour embeddings: one CNN pass over ``images``, gathered at the sampled pixels.
@@ -252,7 +273,8 @@ class PoseNet(nn.Module):
         Returns:
             dict: ``R`` (N, 3, 3), ``t`` (N, 3) metres (``X_CO``), ``emb`` (N, E, P) colour embeddings,
             ``att_r``/``att_t`` (N, P) attention weights. The dense head instead: ``coords`` (N, P, 3)
-            object coordinates of the points (metres), ``conf_logit`` (N, P) and ``emb``.
+            object coordinates of the points (metres), ``conf_logit`` (N, P) and ``emb``; with flips also
+            ``flip_logit`` (N, F), the logits of the class's flips, -inf past its count.
         """
         emb = self.embed(images, img_index, choose)
         centroid = cloud.mean(dim=1)
@@ -280,9 +302,14 @@ class PoseNet(nn.Module):
         offsets (same units) from the class's model-box centre, and a confidence logit."""
         f = self.fuse((cloud - centroid[:, None, :]) / OFFSET_SCALE, emb)
         n, p = len(obj_index), cloud.shape[1]
-        o = self.out_d(self.head_d(f)).view(n, self.num_classes, 4, p)[torch.arange(n), obj_index]  # (N, 4, P)
+        o = self.out_d(self.head_d(f)).view(n, self.num_classes, 4 + self.flips, p)[torch.arange(n), obj_index]
         coords = self.centres[obj_index].to(o.dtype)[:, None, :] + OFFSET_SCALE * o[:, :3].transpose(1, 2)
-        return {"coords": coords, "conf_logit": o[:, 3], "emb": emb}
+        out = {"coords": coords, "conf_logit": o[:, 3], "emb": emb}
+        if self.flips:
+            logit = o[:, 4:].mean(dim=2)  # (N, F)
+            room = torch.arange(self.flips, device=o.device)[None] < self.flip_n[obj_index][:, None]
+            out["flip_logit"] = logit.masked_fill(~room, float("-inf"))
+        return out
 
 
 class Refiner(nn.Module):
@@ -321,7 +348,7 @@ class Refiner(nn.Module):
 def build_posenet(cfg, num_classes: int) -> PoseNet:
     """The :class:`PoseNet` of a :class:`~sixdpose.pose.config.PoseConfig`."""
     return PoseNet(num_classes, cfg.width, cfg.emb_dim, cfg.norm, cfg.rotation, cfg.translation,
-                   getattr(cfg, "head", "paper"))
+                   getattr(cfg, "head", "paper"), getattr(cfg, "flips", 0))
 
 
 def build_refiner(cfg, num_classes: int, emb_dim: int) -> Refiner:

@@ -33,7 +33,7 @@ from ..training import train as _engine_train
 from . import checkpoint as ck
 from .config import PoseConfig, RefinerConfig, profile_config, refiner_profile_config
 from .data import FrameDataset, PoseError, collate_frames, collate_list, sample_model_points
-from .dense import coordinate_targets, dense_loss, model_symmetry
+from .dense import canonical_flip, coordinate_targets, dense_loss, flip_loss, model_symmetry, shape_flips
 from .geometry import compose_refinement, perturb_poses, to_object_frame
 from .loss import pose_loss
 from .model import build_posenet, build_refiner
@@ -163,6 +163,13 @@ class PoseTask(TrainTask):
             net.seen.zero_()  # counted from here (a resumed run's count comes with its weights)
             self.symmetries = {oid: model_symmetry(reader.model(oid)) for oid in self.model_points} \
                 if cfg.head == "dense" else {}
+            self.flips = {}
+            if cfg.head == "dense" and cfg.flips:
+                flips = {oid: shape_flips(reader.model(oid), cfg.flips) for oid in self.model_points}
+                self.flips = {oid: f for oid, f in flips.items() if len(f.R) > 1}
+                net.set_flips({self.class_index[oid]: (f.R, f.t) for oid, f in self.flips.items()})
+                log.info("shape flips: %s", ", ".join(f"obj {oid}: {len(f.R)}" for oid, f in sorted(self.flips.items()))
+                         or "none")
         else:
             net = build_refiner(cfg, len(classes), int(pose_ckpt["arch"]["emb_dim"]))
         self.val_reader = as_reader(self.val, split="test") if self.val is not None else None
@@ -198,13 +205,24 @@ class PoseTask(TrainTask):
         if is_pose:
             self._count(net, obj, ctx)
         if is_pose and cfg.head == "dense":
-            tgs = [coordinate_targets(i.cloud, i.R, i.t, self.symmetries[i.obj_id]) for i in insts]
+            tgs, labels = [], []
+            for i in insts:
+                fl = self.flips.get(i.obj_id)
+                if fl is None:  # the object's own symmetries: the loss takes the best candidate
+                    tgs.append(coordinate_targets(i.cloud, i.R, i.t, self.symmetries[i.obj_id]))
+                    labels.append(0)
+                else:  # a shape flip: the canonical turn's coordinates, the turn classified
+                    d = canonical_flip(i.R, fl)
+                    tgs.append(coordinate_targets(i.cloud, i.R, i.t, fl)[d:d + 1])
+                    labels.append(d)
             S = max(len(x) for x in tgs)
             tg = np.stack([np.concatenate([x, np.repeat(x[:1], S - len(x), axis=0)]) for x in tgs])
             with ctx.autocast():
                 out = net(images, img_index, choose, cloud, obj)
             loss, _ = dense_loss(out["coords"].float(), out["conf_logit"].float(), torch.from_numpy(tg).to(dev),
                                  mode=cfg.dense_loss)
+            if "flip_logit" in out:
+                loss = loss + cfg.flip_weight * flip_loss(out["flip_logit"].float(), torch.tensor(labels, device=dev))
             return {"loss": loss.mean()}
         with ctx.autocast():
             if is_pose:

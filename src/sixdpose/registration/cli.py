@@ -43,7 +43,7 @@ def register(sub) -> None:
 def _run(args) -> int:
     from pathlib import Path
 
-    from ..artifacts.poses import RESULTS_HEADER, write_results
+    from ..artifacts.poses import RESULTS_HEADER, results_config_path, write_results
     from ..artifacts.tables import write_table
     from ..datasets.readers import open_dataset
     from ..fileio import claim_output_file
@@ -68,7 +68,7 @@ def _run(args) -> int:
                             limit=args.limit or None, min_px=args.min_px, min_score=args.score_thresh,
                             progress=not args.no_progress, indices=indices, failures=failures)
     write_results(rows, out)
-    cfg.save(out.with_name(out.stem + ".config.yml"))
+    cfg.save(results_config_path(out))
     n_bad = sum(1 for r in rows if r.reason)
     msg = f"wrote {len(rows)} estimates ({n_bad} with score 0) to {out}"
     if failures:
