@@ -22,6 +22,10 @@ held-out one (leave-one-scene-out: choose on one column, report the other).
 
     python benchmarks/learned_ycbv_sample.py --pose dense=runs/pose_ycbv_dense [--work runs/learned_ycbv_sample]
 
+``--set KEY=VALUE`` (repeatable) is passed to every ``predict-pose`` of the invocation (e.g. ``--set
+ransac_threshold=0.06``, the dense fit's inlier distance) and recorded in the rows' ``predict-pose --set``
+column; give such a run its own label.
+
 ``--keep`` keeps the rows of the result file already there whose run label is not given this time (runs
 measured earlier, perhaps on another machine: each row names its pose run and the date it was measured),
 so a new run can be added beside the old ones without their run directories.
@@ -81,10 +85,13 @@ def main() -> None:
     ap.add_argument("--work", default="runs/learned_ycbv_sample", help="results CSVs and evaluations")
     ap.add_argument("--results-dir", default="results")
     ap.add_argument("--keep", action="store_true", help="keep the existing result's rows of the runs not given")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a predict-pose --set of every run given (repeatable)")
     a = ap.parse_args()
     work = Path(a.work)
     work.mkdir(parents=True, exist_ok=True)
     rows, inputs = [], []
+    sets = [x for kv in a.set for x in ("--set", kv)]
     for spec in a.pose:
         label, _, run = spec.partition("=")
         if not run or not Path(run, "model.pt").is_file():
@@ -101,8 +108,8 @@ def main() -> None:
                      "--out", str(out))
             elif not out.is_file():
                 _cli("predict-pose", "--pose", run, "--data", a.data, "--split", "train_real", "--masks", "gt",
-                     "--no-progress", "--out", str(out), *switches)
-            row = {"run": label, "pose run": run, "variant": variant,
+                     "--no-progress", "--out", str(out), *sets, *switches)
+            row = {"run": label, "pose run": run, "variant": variant, "predict-pose --set": " ".join(a.set) or "-",
                    "measured": datetime.date.today().isoformat(), "instances/s": _instances_per_s(out)}
             for part, col in (("0", "scene 000000 (tuning)"), ("1", "scene 000001 (held out)"), ("all", "both")):
                 ev = work / f"{stem}_eval_{part}"
@@ -120,9 +127,11 @@ def main() -> None:
         kept = [dict(r) for r in json.loads(old.read_text())["rows"] if r.get("run") not in given]
         for r in kept:
             r.setdefault("measured", "an earlier session (its run is not here)")
+            r.setdefault("predict-pose --set", "-")
         rows = rows + kept
-    rows = [{k: r.get(k) for k in ("run", "pose run", "variant", "measured", "scene 000000 (tuning)",
-                                   "scene 000001 (held out)", "both", "instances/s")} for r in rows]
+    cols = ("run", "pose run", "variant", "predict-pose --set", "measured", "scene 000000 (tuning)",
+            "scene 000001 (held out)", "both", "instances/s")
+    rows = [{k: r.get(k) for k in cols} for r in rows]
     write_result("learned_ycbv_sample", rows, results_dir=a.results_dir, inputs=inputs,
                  description="predict-pose [--icp] [--verify] on ycbv_sample train_real (networks trained on generated "
                              "data only), GT masks, min-px 0, BOP symmetric ids 1,13,14,16,18-21: correct/GT per scene",

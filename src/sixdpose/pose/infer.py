@@ -91,7 +91,7 @@ def _orthonormalise(R: np.ndarray) -> np.ndarray:
 
 #: Fields of a pose run's :class:`~.config.PoseConfig` that ``predict-pose --set`` may change: they act
 #: on the points sampled per instance at inference, not on the network's shapes.
-INFERENCE_FIELDS = ("num_points", "min_points")
+INFERENCE_FIELDS = ("num_points", "min_points", "ransac_threshold", "ransac_iterations")
 
 #: Smallest score of a verified pose (``predict-pose --verify`` writes the verification's score; the
 #: evaluation reads a score <= 0 as "no estimate", which a low verification score must not become).
