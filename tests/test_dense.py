@@ -150,13 +150,25 @@ def test_model_symmetry_reads_bop_annotations():
 
 
 # ---------------------------------------------------------------- training, resume, inference
+def _predict_proper_poses(ds, run, out, n_rows: int, z_range: tuple[float, float]) -> None:
+    """``predict-pose`` of ``run`` on ``ds`` writes ``n_rows`` scored rows of proper rotations whose
+    translations are finite with a depth inside ``z_range`` (metres: the robust fit puts them on the cloud)."""
+    from sixdpose.artifacts.poses import read_results
+
+    assert main(["predict-pose", "--data", str(ds), "--pose", str(run), "--out", str(out), "--no-progress"]) == 0
+    rows = read_results(out)
+    assert len(rows) == n_rows and all(r.score > 0 for r in rows)
+    for r in rows:
+        assert np.allclose(r.R @ r.R.T, np.eye(3), atol=1e-6) and np.linalg.det(r.R) > 0
+        assert np.isfinite(r.t).all() and z_range[0] < r.t[2] < z_range[1]
+
+
 @pytest.fixture(scope="module")
 def pose_ds(tmp_path_factory) -> Path:
     return write_pose_dataset(tmp_path_factory.mktemp("dense") / "ds")
 
 
 def test_dense_training_resumes_bit_for_bit_and_predict_pose_writes_csv(pose_ds, tmp_path):
-    from sixdpose.artifacts.poses import read_results
     from sixdpose.pose.train import train_pose
 
     s = train_pose(pose_ds, tmp_path / "a", profile="smoke", progress=False, **DENSE)
@@ -170,14 +182,7 @@ def test_dense_training_resumes_bit_for_bit_and_predict_pose_writes_csv(pose_ds,
     for k in a["model"]:
         assert torch.equal(a["model"][k], b["model"][k]), k
     assert float(a["model"]["seen"][0]) == 2 * 4  # 2 epochs x 3 images, the first with two instances
-    out = tmp_path / "res.csv"
-    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(tmp_path / "a"), "--out", str(out),
-                 "--no-progress"]) == 0
-    rows = read_results(out)
-    assert len(rows) == 4 and all(r.score > 0 for r in rows)
-    for r in rows:
-        assert np.allclose(r.R @ r.R.T, np.eye(3), atol=1e-6) and np.linalg.det(r.R) > 0
-        assert np.isfinite(r.t).all() and 0.3 < r.t[2] < 0.9  # the robust fit puts it on the cloud
+    _predict_proper_poses(pose_ds, tmp_path / "a", tmp_path / "res.csv", 4, (0.3, 0.9))
 
 
 def test_dense_head_learns_coordinates(pose_ds, tmp_path):
@@ -401,7 +406,6 @@ def test_training_with_flips_stores_them_and_predict_pose_applies_them(tmp_path)
     writes proper poses on the cloud."""
     from scipy.spatial.transform import Rotation as Rot
 
-    from sixdpose.artifacts.poses import read_results
     from sixdpose.datasets.layout import write_dataset
     from sixdpose.pose.train import train_pose
     from test_reg_helpers import _box_surface
@@ -424,11 +428,4 @@ def test_training_with_flips_stores_them_and_predict_pose_applies_them(tmp_path)
     ckpt = ck.load(tmp_path / "r" / ck.LAST)
     assert ckpt["arch"]["flips"] == 4 and int(ckpt["model"]["flip_n"][0]) == 4
     assert np.allclose(ckpt["model"]["flip_R"][0, 0].numpy(), np.eye(3))
-    out = tmp_path / "res.csv"
-    assert main(["predict-pose", "--data", str(ds), "--pose", str(tmp_path / "r"), "--out", str(out),
-                 "--no-progress"]) == 0
-    rows = read_results(out)
-    assert len(rows) == 2 and all(r.score > 0 for r in rows)
-    for r in rows:
-        assert np.allclose(r.R @ r.R.T, np.eye(3), atol=1e-6) and np.linalg.det(r.R) > 0
-        assert 0.4 < r.t[2] < 0.7
+    _predict_proper_poses(ds, tmp_path / "r", tmp_path / "res.csv", 2, (0.4, 0.7))
