@@ -1,10 +1,10 @@
 """Hypothesis verification (``register --verify``) on the YCB-Video sample, on and off, per scene and object.
 
 Reads the evaluations of the results CSVs made by (for M in super4pcs, ransac, fgr; with and without
-``--verify``; ``runs/verify/<stem>.csv``)::
+``--verify``; RANSAC also with the ``fast`` preset, verified; ``runs/verify/<stem>.csv``)::
 
     sixdpose register --data ../shared/data/ycbv_sample --split train_real --method M --icp --masks gt \\
-        --workers 1 --verify|--no-verify --out runs/verify/<stem>.csv
+        --profile default|fast --workers 1 --verify|--no-verify --out runs/verify/<stem>.csv
     sixdpose evaluate --data ../shared/data/ycbv_sample --split train_real --symmetric-ids \\
         1,13,14,16,18,19,20,21 --min-px 0 --no-bop --results <csv> --out runs/verify/<stem>_eval_<all|0|1>
 
@@ -31,21 +31,23 @@ from pathlib import Path
 
 from sixdpose.artifacts.results import write_result
 
-#: (method label, verify, results CSV stem under --runs)
+#: (method label, verify, results CSV stem under --runs, register --profile)
 RUNS = [
-    ("Super4PCS + ICP", False, "base_s4pcs_icp"),
-    ("Super4PCS + ICP", True, "final_super4pcs_icp_verify"),
-    ("RANSAC + ICP", False, "final_ransac_icp"),
-    ("RANSAC + ICP", True, "final_ransac_icp_verify"),
-    ("FGR + ICP", False, "final_fgr_icp"),
-    ("FGR + ICP", True, "final_fgr_icp_verify"),
+    ("Super4PCS + ICP", False, "base_s4pcs_icp", "default"),
+    ("Super4PCS + ICP", True, "final_super4pcs_icp_verify", "default"),
+    ("RANSAC + ICP", False, "final_ransac_icp", "default"),
+    ("RANSAC + ICP", True, "final_ransac_icp_verify", "default"),
+    ("RANSAC + ICP (fast)", True, "fast_ransac_icp_verify", "fast"),
+    ("FGR + ICP", False, "final_fgr_icp", "default"),
+    ("FGR + ICP", True, "final_fgr_icp_verify", "default"),
 ]
 
 
 #: the sample, its split and the BOP symmetric ids of YCB-Video (the sample carries no annotation)
 DATA, SPLIT, SYMMETRIC = "../shared/data/ycbv_sample", "train_real", "1,13,14,16,18,19,20,21"
 #: method label -> register --method
-ALGORITHM = {"Super4PCS + ICP": "super4pcs", "RANSAC + ICP": "ransac", "FGR + ICP": "fgr"}
+ALGORITHM = {"Super4PCS + ICP": "super4pcs", "RANSAC + ICP": "ransac", "RANSAC + ICP (fast)": "ransac",
+             "FGR + ICP": "fgr"}
 
 
 def run_all(runs: Path, data: str) -> None:
@@ -53,11 +55,11 @@ def run_all(runs: Path, data: str) -> None:
     CSV is not in ``runs`` yet."""
     exe = [sys.executable, "-m", "sixdpose"]
     runs.mkdir(parents=True, exist_ok=True)
-    for label, on, stem in RUNS:
+    for label, on, stem, profile in RUNS:
         csv_path = runs / f"{stem}.csv"
         if not csv_path.is_file():
             subprocess.run([*exe, "register", "--data", data, "--split", SPLIT, "--method", ALGORITHM[label], "--icp",
-                            "--masks", "gt", "--min-px", "0", "--workers", "1", "--no-progress",
+                            "--profile", profile, "--masks", "gt", "--min-px", "0", "--workers", "1", "--no-progress",
                             "--verify" if on else "--no-verify", "--out", str(csv_path)], check=True)
         for part in ("all", "0", "1"):
             subprocess.run([*exe, "evaluate", "--data", data, "--split", SPLIT, "--symmetric-ids", SYMMETRIC,
@@ -88,7 +90,7 @@ def main() -> None:
     if a.run:
         run_all(runs, a.data)
     rows, per_obj, inputs = [], {}, []
-    for label, on, stem in RUNS:
+    for label, on, stem, _ in RUNS:
         row = {"method": label, "verify": "on" if on else "off"}
         for part, col in (("0", "scene 000000"), ("1", "scene 000001"), ("all", "both scenes")):
             ev = runs / f"{stem}_eval_{part}"

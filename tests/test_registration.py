@@ -1,6 +1,7 @@
 """Geometry, the three methods (+ ICP), the register runner / CLI and the evaluate CLI."""
 
 import csv
+import dataclasses
 
 import numpy as np
 import pytest
@@ -136,6 +137,9 @@ def test_presets_behaviour(syn):
 
     with pytest.raises(ConfigError, match="bogus"):
         get_preset("default", bogus=1)
+    fast, default = get_preset("fast"), get_preset("default")
+    assert {f.name for f in dataclasses.fields(fast) if getattr(fast, f.name) != getattr(default, f.name)} == {
+        "ransac_max_iteration"}
     with pytest.raises(ConfigError, match="unknown profile"):
         get_preset("nope")
     with pytest.raises(ConfigError, match="icp_kind"):
@@ -335,6 +339,7 @@ def test_verify_retries_a_poorly_fitting_pose_and_keeps_the_best():
     (["--set", "verify=false", "--verify"], True),  # the flag wins over --set
     (["--profile", "paper"], False),  # the paper's methods are unverified
     (["--profile", "paper", "--verify"], True),
+    (["--profile", "fast"], True),  # the fast preset exists for verification
 ])
 def test_register_verifies_by_default(syn, tmp_path, args, verify):
     """``register`` runs the hypothesis verification with ``--profile default`` unless ``--no-verify`` (or
@@ -345,7 +350,10 @@ def test_register_verifies_by_default(syn, tmp_path, args, verify):
     out = tmp_path / "r.csv"
     assert _register(syn, "fgr", "--icp", "--limit", "1", "--workers", "1", "--no-progress", "--out", str(out),
                      *args) == 0
-    assert yaml.safe_load(out.with_name("r.config.yml").read_text())["verify"] is verify
+    saved = yaml.safe_load(out.with_name("r.config.yml").read_text())
+    assert saved["verify"] is verify
+    # fast = default with fewer RANSAC iterations, and nothing else
+    assert saved["ransac_max_iteration"] == (20000 if "fast" in args else 100000 if "paper" in args else 50000)
     if not args:
         ref = tmp_path / "on.csv"
         assert _register(syn, "fgr", "--icp", "--limit", "1", "--workers", "1", "--no-progress", "--verify",
