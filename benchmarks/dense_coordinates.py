@@ -4,7 +4,8 @@ For every instance of the frames read (GT masks, at least ``--min-px`` visible p
 network's input as ``predict-pose`` does (:func:`sixdpose.pose.data.extract_instance`), runs the network
 once and compares its per-point object coordinates with the ground truth's (the best of the object's
 symmetric candidates, :func:`sixdpose.pose.dense.coordinate_targets`; with shape flips the canonical turn's,
-:func:`sixdpose.pose.dense.canonical_flip`, and whether the flip classifier names it). It prints per object
+:func:`sixdpose.pose.dense.canonical_flip`, and whether the run names it: by its flip classifier or, for
+a run without the CNN, by the model's colours on the true canonical pose). It prints per object
 the median over instances of the mean point error (mm), and the same for a network that would answer the
 model-box centre for every point (the error of knowing nothing but the class). A run whose error is not far
 below that baseline on its own training frames is underfitting, whatever its pose accuracy.
@@ -35,7 +36,9 @@ from sixdpose.pose.infer import Estimator
 def measure(pose: str, data: str, split: str, images: int, min_px: int, seed: int = 0) -> list[dict]:
     """One row per object of the run ``pose`` on ``images`` frames of ``data``: ``n`` instances, ``network_mm``
     and ``constant_mm`` (median over instances of the mean point error, the network's and the
-    constant-centre answer's), their ``ratio``, and ``flip_right`` (``right/instances`` with shape flips)."""
+    constant-centre answer's), their ``ratio``, and ``flip_right`` (``right/instances`` with shape flips: the
+    turn the run names, by its classifier or, for a run naming turns by the model's colours
+    (``flip_choice``), by those colours given the true canonical pose)."""
     ds = open_dataset(data, split)
     est = Estimator(pose, reader=ds, device="cpu")
     net, cfg = est.net, est.cfg
@@ -57,7 +60,7 @@ def measure(pose: str, data: str, split: str, images: int, min_px: int, seed: in
                 syms[o.obj_id] = model_symmetry(ds.model(o.obj_id))
             inst = extract_instance(s.rgb, s.depth, s.K, o.mask, o.obj_id, crop=cfg.crop, margin=cfg.crop_margin,
                                     num_points=cfg.num_points, min_points=cfg.min_points, rng=rng, index=k,
-                                    depth_band=float(ds.model(o.obj_id).diameter))
+                                    depth_band=float(ds.model(o.obj_id).diameter), keep_points=est.colour_flips)
             if not isinstance(inst, str):
                 insts.append(inst)
                 gts.append(o)
@@ -81,7 +84,10 @@ def measure(pose: str, data: str, split: str, images: int, min_px: int, seed: in
                 fl = flips[o.obj_id]
                 d = canonical_flip(o.R, fl)
                 tg = coordinate_targets(inst.cloud, o.R, o.t, fl)[d:d + 1]
-                right = int(out["flip_logit"][j].argmax()) == d
+                named = None
+                if est.colour_flips:  # the turn named by the model's colours, from the true canonical pose
+                    named = est._colour_flip(inst, o.R @ fl.R[d], o.R @ fl.t[d] + o.t, ci)
+                right = (int(out["flip_logit"][j].argmax()) if named is None else named) == d
             else:
                 tg = coordinate_targets(inst.cloud, o.R, o.t, syms[o.obj_id])
             err = np.linalg.norm(coords[j][None] - tg, axis=2).mean(axis=1).min()

@@ -18,6 +18,10 @@ Usage::
   dense loss on random targets, and it has no refiner). Frames are built in memory beforehand (no disk reads);
   segmentation is not included. Without ``--pose`` untrained networks of the profile are timed
   (the cost does not depend on the weights).
+* With ``--data DIR[@SPLIT]`` (a trained ``--pose``) the inference FPS is measured on the dataset's first
+  ``--frames`` frames with their ground-truth masks instead (the reader given to the estimator: a run that
+  names its shape flips by the models' colours does so). ``--appearance local|none`` (with ``--head dense``)
+  times untrained networks without the CNN (``PoseConfig.appearance``); a trained run is timed with its own.
 * With ``--seg SEG_RUN --data DIR`` (trained runs): end-to-end FPS on the dataset's first ``--frames``
   real frames, loaded into memory first: Mask R-CNN on the RGB image, then the pose network and 2
   refinement iterations on every detection of the frame in one batch (section V-A: disk reads excluded).
@@ -45,7 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 from sixdpose.artifacts.results import add_result_arguments, save_from_args, script_command  # noqa: E402
 from sixdpose.datasets.base import Instance, Sample  # noqa: E402
 from sixdpose.pose import checkpoint as ck  # noqa: E402
-from sixdpose.pose.config import profile_config, refiner_profile_config  # noqa: E402
+from sixdpose.pose.config import APPEARANCES, profile_config, refiner_profile_config  # noqa: E402
 from sixdpose.pose.dense import dense_loss  # noqa: E402
 from sixdpose.pose.geometry import compose_refinement, to_object_frame  # noqa: E402
 from sixdpose.pose.infer import Estimator  # noqa: E402
@@ -79,9 +83,9 @@ def synthetic_frame(n: int, seed: int = 0) -> Sample:
     return Sample(0, 0, rgb, depth, K, insts)
 
 
-def fake_runs(profile: str, tmp: Path, classes: int = 21, head: str = "paper"):
+def fake_runs(profile: str, tmp: Path, classes: int = 21, head: str = "paper", appearance: str = "cnn"):
     """Untrained pose and refiner checkpoints of a profile (for timing only; no refiner for the dense head)."""
-    cfg, rcfg = profile_config(profile, {"head": head}), refiner_profile_config(profile)
+    cfg, rcfg = profile_config(profile, {"head": head, "appearance": appearance}), refiner_profile_config(profile)
     cls = [[i + 1, f"obj{i + 1}", False] for i in range(classes)]
     net, ref = build_posenet(cfg, classes), build_refiner(rcfg, classes, cfg.emb_dim)
     base = {"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "classes": cls, "epoch": 0, "global_step": 0,
@@ -109,9 +113,10 @@ def timed(fn, items, device) -> list[float]:
 
 
 def train_throughput(profile: str, device, steps: int, inst_per_image: int = 6, classes: int = 21,
-                     head: str = "paper") -> dict:
+                     head: str = "paper", appearance: str = "cnn") -> dict:
     """Instances per second of optimiser steps of the main network and of the refiner (paper head)."""
-    cfg, rcfg = profile_config(profile, {"head": head}), refiner_profile_config(profile)
+    cfg = profile_config(profile, {"head": head, "appearance": appearance})
+    rcfg = refiner_profile_config(profile)
     torch.manual_seed(0)
     net = build_posenet(cfg, classes).to(device).train()
     ref = build_refiner(rcfg, classes, cfg.emb_dim).to(device).train()
@@ -164,15 +169,26 @@ def train_throughput(profile: str, device, steps: int, inst_per_image: int = 6, 
     return res
 
 
-def inference_fps(pose, refiner, device, instances: int, frames: int) -> dict:
-    """End-to-end frames per second of Estimator.predict (pose net + 2 refinement iterations, or the dense
-    head's robust fit when ``refiner`` is None)."""
-    est = Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device))
-    frame = synthetic_frame(instances)
-    est.predict(frame)  # warm-up (first-call allocations)
-    times = timed(lambda _: est.predict(frame), range(frames), device)
+def inference_fps(pose, refiner, device, instances: int, frames: int, data: str | None = None) -> dict:
+    """Frames per second of Estimator.predict (pose net + 2 refinement iterations, or the dense head's robust
+    fit when ``refiner`` is None) on a synthetic frame of ``instances`` objects, or with ``data`` (``PATH`` or
+    ``PATH@SPLIT``) on its first ``frames`` frames with their ground-truth masks, the reader given to the
+    estimator (so a run naming its flips by the models' colours does so; disk reads not timed)."""
+    if data is None:
+        est = Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device))
+        samples = [synthetic_frame(instances)] * (frames + 1)
+    else:
+        from sixdpose.datasets import as_reader
+
+        path, _, split = data.partition("@")
+        reader = as_reader(path, split=split or "test")
+        samples = [reader.load(k) for k in reader.keys()[: frames + 1]]
+        est = Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device), reader=reader)
+    est.predict(samples[0])  # warm-up (first-call allocations)
+    times = timed(lambda s: est.predict(s), samples[1:], device)
+    n_inst = float(np.mean([len(s.instances) for s in samples[1:]]))
     return {"infer_fps": 1.0 / float(np.mean(times)), "infer_ms_per_frame": 1000 * float(np.mean(times)),
-            "infer_instances_per_frame": instances}
+            "infer_instances_per_frame": n_inst}
 
 
 def end_to_end_fps(seg, pose, refiner, data, device, frames: int) -> dict:
@@ -181,10 +197,12 @@ def end_to_end_fps(seg, pose, refiner, data, device, frames: int) -> dict:
     from sixdpose.datasets import as_reader
     from sixdpose.segmentation.infer import Segmenter
 
-    reader = as_reader(data, split="test")
+    path, _, split = data.partition("@")
+    reader = as_reader(path, split=split or "test")
     samples = [reader.load(k, masks=False) for k in reader.keys()[: frames + 1]]  # disk reads not timed
     segm = Segmenter(seg, device=str(device))
-    est = Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device))  # scores >= 0.5, as predict-pose
+    est = Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device),
+                    reader=reader)  # scores >= 0.5, as predict-pose; the reader for flips named by colour
 
     def run(sample):
         out = segm.predict([sample.rgb])[0]
@@ -206,6 +224,8 @@ def main(argv=None) -> int:
     ap.add_argument("--profile", default="cpu", choices=("smoke", "cpu", "paper"))
     ap.add_argument("--head", default="paper", choices=("paper", "dense"),
                     help="the untrained networks' head (without --pose)")
+    ap.add_argument("--appearance", default="cnn", choices=APPEARANCES,
+                    help="the untrained networks' per-point embedding (dense head; without --pose)")
     ap.add_argument("--pose", default=None, help="a trained pose run (default: untrained networks of --profile)")
     ap.add_argument("--refiner", default=None, help="a trained refiner run (with --pose)")
     ap.add_argument("--device", default="cpu")
@@ -216,13 +236,15 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None)
     ap.add_argument("--seg", default=None, help="a trained segmentation run: also time segmentation + pose end to end")
     ap.add_argument("--data", default=None,
-                    help="dataset whose first --frames frames the end-to-end timing uses (with --seg)")
+                    help="PATH[@SPLIT]: time inference on its first --frames frames (GT masks; with --seg, end to "
+                         "end on the segmentation's masks as well) instead of a synthetic frame")
     add_result_arguments(ap, None, Path(__file__).resolve().parents[1] / "results", "pose_<profile>_<device>")
     a = ap.parse_args(argv)
-    if a.result_name is None:
-        a.result_name = f"pose_{a.profile}_{'dense_' if a.head == 'dense' else ''}{torch.device(a.device).type}"
-    if (a.seg is None) != (a.data is None) or (a.seg and not a.pose):
-        print("--seg and --data go together, and need --pose (and --refiner)", file=sys.stderr)
+    if (a.seg and a.data is None) or (a.seg and not a.pose) or (a.data and not a.pose):
+        print("--seg needs --data, and both need --pose (and --refiner)", file=sys.stderr)
+        return 2
+    if a.appearance != "cnn" and a.head != "dense":
+        print("--appearance other than cnn needs --head dense", file=sys.stderr)
         return 2
     if a.threads:
         torch.set_num_threads(a.threads)
@@ -230,16 +252,24 @@ def main(argv=None) -> int:
     if device.type == "cuda" and not torch.cuda.is_available():
         print("CUDA is not available", file=sys.stderr)
         return 2
-    out = {"profile": a.profile, "head": a.head, "device": str(device), "threads": torch.get_num_threads()}
+    head, appearance = a.head, a.appearance
+    if a.pose:  # a trained run: its own head and embedding (for the training step timed too)
+        saved = ck.load(a.pose, kind="pose")["config"]
+        head, appearance = saved.get("head", "paper"), saved.get("appearance", "cnn")
+    if a.result_name is None:
+        look = "" if appearance == "cnn" else f"{appearance}_"
+        a.result_name = f"pose_{a.profile}_{'dense_' if head == 'dense' else ''}{look}{device.type}"
+    out = {"profile": a.profile, "head": head, "appearance": appearance, "device": str(device),
+           "threads": torch.get_num_threads()}
     with tempfile.TemporaryDirectory() as tmp:
-        pose, ref = (a.pose, a.refiner) if a.pose else fake_runs(a.profile, Path(tmp), head=a.head)
-        out.update(inference_fps(pose, ref, device, a.instances, a.frames))
+        pose, ref = (a.pose, a.refiner) if a.pose else fake_runs(a.profile, Path(tmp), head=head, appearance=appearance)
+        out.update(inference_fps(pose, ref, device, a.instances, a.frames, a.data))
         out["infer_peak_mib"] = peak_mib(device)
         if a.seg:
             out.update(end_to_end_fps(a.seg, pose, ref, a.data, device, a.frames))
         if device.type == "cuda":
             torch.cuda.reset_peak_memory_stats(device)
-        out.update(train_throughput(a.profile, device, a.steps, a.instances, head=a.head))
+        out.update(train_throughput(a.profile, device, a.steps, a.instances, head=head, appearance=appearance))
         out["train_peak_mib"] = peak_mib(device)
     for k, v in out.items():
         print(f"{k:32s} {v:.2f}" if isinstance(v, float) else f"{k:32s} {v}")
@@ -250,14 +280,18 @@ def main(argv=None) -> int:
     nets = "trained runs" if a.pose else f"untrained {a.profile} networks"
     save_from_args(a, out, command=script_command(__file__, argv), units=units,
                    description=f"learned pose stage ({nets}) "
-                               f"on {out['device']}: inference FPS with {a.instances} instances per frame "
-                               + ("(+ 2 refinement iterations)" if a.head == "paper" else "(dense head, RANSAC fit)")
+                               f"on {out['device']}: inference FPS with {out['infer_instances_per_frame']:g} "
+                               "instances per frame "
+                               + ("(+ 2 refinement iterations)" if head == "paper"
+                                  else f"(dense head, {appearance} embedding, RANSAC fit)")
+                               + (f" on {a.data} (GT masks)" if a.data else "")
                                + ", training instances/s, peak memory"
                                + ("; end to end with segmentation on " + Path(a.data).name if a.seg else ""),
-                   config={"profile": a.profile, "head": a.head, "pose": a.pose, "refiner": a.refiner,
+                   config={"profile": a.profile, "head": head, "appearance": appearance, "pose": a.pose,
+                           "refiner": a.refiner,
                            "device": a.device, "instances": a.instances, "frames": a.frames, "steps": a.steps,
                            "threads": a.threads, "seg": a.seg, "data": a.data,
-                           "pose_config": profile_config(a.profile, {"head": a.head}).to_dict()
+                           "pose_config": profile_config(a.profile, {"head": head, "appearance": appearance}).to_dict()
                            if not a.pose else None})
     return 0
 

@@ -31,23 +31,20 @@ from pathlib import Path
 
 from sixdpose.artifacts.results import write_result
 
-#: (method label, verify, results CSV stem under --runs, register --profile)
+#: (method label, register --method, verify, results CSV stem under --runs, register --profile)
 RUNS = [
-    ("Super4PCS + ICP", False, "base_s4pcs_icp", "default"),
-    ("Super4PCS + ICP", True, "final_super4pcs_icp_verify", "default"),
-    ("RANSAC + ICP", False, "final_ransac_icp", "default"),
-    ("RANSAC + ICP", True, "final_ransac_icp_verify", "default"),
-    ("RANSAC + ICP (fast)", True, "fast_ransac_icp_verify", "fast"),
-    ("FGR + ICP", False, "final_fgr_icp", "default"),
-    ("FGR + ICP", True, "final_fgr_icp_verify", "default"),
+    ("Super4PCS + ICP", "super4pcs", False, "base_s4pcs_icp", "default"),
+    ("Super4PCS + ICP", "super4pcs", True, "final_super4pcs_icp_verify", "default"),
+    ("RANSAC + ICP", "ransac", False, "final_ransac_icp", "default"),
+    ("RANSAC + ICP", "ransac", True, "final_ransac_icp_verify", "default"),
+    ("RANSAC + ICP (fast)", "ransac", True, "fast_ransac_icp_verify", "fast"),
+    ("FGR + ICP", "fgr", False, "final_fgr_icp", "default"),
+    ("FGR + ICP", "fgr", True, "final_fgr_icp_verify", "default"),
 ]
 
 
 #: the sample, its split and the BOP symmetric ids of YCB-Video (the sample carries no annotation)
 DATA, SPLIT, SYMMETRIC = "../shared/data/ycbv_sample", "train_real", "1,13,14,16,18,19,20,21"
-#: method label -> register --method
-ALGORITHM = {"Super4PCS + ICP": "super4pcs", "RANSAC + ICP": "ransac", "RANSAC + ICP (fast)": "ransac",
-             "FGR + ICP": "fgr"}
 
 
 def run_all(runs: Path, data: str) -> None:
@@ -55,10 +52,10 @@ def run_all(runs: Path, data: str) -> None:
     CSV is not in ``runs`` yet."""
     exe = [sys.executable, "-m", "sixdpose"]
     runs.mkdir(parents=True, exist_ok=True)
-    for label, on, stem, profile in RUNS:
+    for _, method, on, stem, profile in RUNS:
         csv_path = runs / f"{stem}.csv"
         if not csv_path.is_file():
-            subprocess.run([*exe, "register", "--data", data, "--split", SPLIT, "--method", ALGORITHM[label], "--icp",
+            subprocess.run([*exe, "register", "--data", data, "--split", SPLIT, "--method", method, "--icp",
                             "--profile", profile, "--masks", "gt", "--min-px", "0", "--workers", "1", "--no-progress",
                             "--verify" if on else "--no-verify", "--out", str(csv_path)], check=True)
         for part in ("all", "0", "1"):
@@ -90,7 +87,7 @@ def main() -> None:
     if a.run:
         run_all(runs, a.data)
     rows, per_obj, inputs = [], {}, []
-    for label, on, stem, _ in RUNS:
+    for label, _, on, stem, _ in RUNS:
         row = {"method": label, "verify": "on" if on else "off"}
         for part, col in (("0", "scene 000000"), ("1", "scene 000001"), ("all", "both scenes")):
             ev = runs / f"{stem}_eval_{part}"

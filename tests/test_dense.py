@@ -401,13 +401,19 @@ def test_flip_classifier_outputs_and_loss():
     assert PoseConfig(head="dense", flips=4).arch()["flips"] == 4 and "flips" not in PoseConfig(head="dense").arch()
 
 
-def test_training_with_flips_stores_them_and_predict_pose_applies_them(tmp_path):
-    """A box flagged asymmetric: a run with flips=4 keeps the box's 4 turns in its weights and predict-pose
-    writes proper poses on the cloud."""
+def _quadrant_colours(P: np.ndarray) -> np.ndarray:
+    """Colours of a box's points by the signs of their x and y (red, green, blue, yellow): each of the box's
+    four turns shows another pattern."""
+    pal = np.array([[0.9, 0.1, 0.1], [0.1, 0.8, 0.1], [0.1, 0.2, 0.9], [0.9, 0.8, 0.1]])
+    return pal[(P[:, 0] < 0).astype(int) + 2 * (P[:, 1] < 0).astype(int)]
+
+
+def _box_dataset(root: Path, colours: bool = False) -> tuple[Path, np.ndarray]:
+    """Two rendered frames of a 10 x 6 x 3 cm box flagged asymmetric (obj 2), on the test_reg_helpers camera;
+    the model's colours uniform grey or, with ``colours``, by quadrant. Returns ``(dataset, model points)``."""
     from scipy.spatial.transform import Rotation as Rot
 
     from sixdpose.datasets.layout import write_dataset
-    from sixdpose.pose.train import train_pose
     from test_reg_helpers import _box_surface
 
     rng = np.random.default_rng(0)
@@ -422,10 +428,117 @@ def test_training_with_flips_stores_them_and_predict_pose_applies_them(tmp_path)
                        "instances": [{"obj_name": "035_power_drill", "obj_id": 2, "inst": 0, "R": R, "t": t,
                                       "mask": label == 0}]})
     models = {"035_power_drill": {"obj_id": 2, "diameter": 0.12, "symmetric": False, "points": P, "normals": N,
-                                  "colors": np.full_like(P, 0.5)}}
-    ds = write_dataset(tmp_path / "box", images, models, {"generator": "tests.test_dense"})
+                                  "colors": _quadrant_colours(P) if colours else np.full_like(P, 0.5)}}
+    return write_dataset(root, images, models, {"generator": "tests.test_dense"}), P
+
+
+def test_training_with_flips_stores_them_and_predict_pose_applies_them(tmp_path):
+    """A box flagged asymmetric: a run with flips=4 keeps the box's 4 turns in its weights and predict-pose
+    writes proper poses on the cloud."""
+    from sixdpose.pose.train import train_pose
+
+    ds, _ = _box_dataset(tmp_path / "box")
     train_pose(ds, tmp_path / "r", profile="smoke", progress=False, **dict(DENSE, flips=4))
     ckpt = ck.load(tmp_path / "r" / ck.LAST)
     assert ckpt["arch"]["flips"] == 4 and int(ckpt["model"]["flip_n"][0]) == 4
     assert np.allclose(ckpt["model"]["flip_R"][0, 0].numpy(), np.eye(3))
+    _predict_proper_poses(ds, tmp_path / "r", tmp_path / "res.csv", 2, (0.4, 0.7))
+
+
+# ---------------------------------------------------------------- geometry alone, flips named by colour
+def test_colour_scores_rank_the_true_turn_of_a_coloured_box_first():
+    """Each of a quadrant-coloured box's four turns, seen from above, scores below the true pose."""
+    from sixdpose.geometry import X_from
+    from sixdpose.pose.dense import shape_flips, unflip
+    from sixdpose.registration.verify import build_grid, colour_scores
+
+    model = _box_model()
+    colors = _quadrant_colours(model.points - model.points.mean(axis=0))
+    grid = build_grid(model.points, colors, model.diameter)
+    fl = shape_flips(model, 4)
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        R, t = Rotation.from_rotvec(rng.normal(size=3) * 0.3).as_matrix(), np.array([0.01, 0.02, 0.6])
+        p_C = model.points @ R.T + t
+        seen = p_C[p_C[:, 2] < np.percentile(p_C[:, 2], 40)]  # the near side
+        cols = colors[p_C[:, 2] < np.percentile(p_C[:, 2], 40)]
+        order = rng.permutation(4)  # the true pose (turn 0) at a random place among the candidates
+        cands = np.stack([X_from(*unflip(R, t, fl.R[d], fl.t[d])) for d in order])
+        sc = colour_scores(cands, seen, cols, grid, model.diameter)
+        assert order[int(np.argmax(sc))] == 0 and np.isfinite(sc).all()
+        # points nowhere near the model: no score
+        assert np.isneginf(colour_scores(cands, seen + 5.0, cols, grid, model.diameter)).all()
+
+
+def test_geometry_only_network_has_no_cnn_and_config_checks():
+    from sixdpose.errors import ConfigError
+    from sixdpose.pose.config import PoseConfig
+    from sixdpose.pose.infer import check_inference_overrides
+    from sixdpose.pose.model import PoseNet
+
+    net = PoseNet(2, width=1 / 16, head="dense", flips=2, appearance="none")
+    assert net.cnn is None and not any(k.startswith("cnn.") for k in net.state_dict())
+    out = net(torch.rand(2, 3, 32, 32), torch.tensor([0, 1]), torch.zeros(2, 16, dtype=torch.long),
+              torch.rand(2, 16, 3), torch.tensor([0, 1]))
+    assert out["coords"].shape == (2, 16, 3) and not out["emb"].any()
+    # appearance=local: no CNN either; the embedding is the local shape, the same for each point wherever it
+    # comes in the cloud (permutation-equivariant) and nonzero
+    loc = PoseNet(2, width=1 / 16, head="dense", appearance="local").eval()
+    assert loc.cnn is None and loc.local is not None
+    cloud = torch.rand(1, 40, 3) * 0.1
+    perm = torch.randperm(40)
+    e1 = loc(None, None, torch.zeros(1, 40, dtype=torch.long), cloud, torch.tensor([0]))["emb"]
+    e2 = loc(None, None, torch.zeros(1, 40, dtype=torch.long), cloud[:, perm], torch.tensor([0]))["emb"]
+    assert e1.shape == (1, loc.emb_dim, 40) and e1.abs().sum() > 0
+    assert torch.allclose(e1[..., perm], e2, atol=1e-5)
+    with pytest.raises(ValueError, match="needs head=dense"):
+        PoseConfig(appearance="none").validate()
+    with pytest.raises(ValueError, match="appearance must be one of"):
+        PoseConfig(head="dense", appearance="depth").validate()
+    with pytest.raises(ValueError, match="flip_choice must be one of"):
+        PoseConfig(head="dense", flip_choice="texture").validate()
+    assert PoseConfig(head="dense", appearance="none").arch()["appearance"] == "none"
+    assert "appearance" not in PoseConfig(head="dense").arch()  # checkpoints with a CNN keep their arch
+    assert check_inference_overrides({"flip_choice": "colour"}) == {"flip_choice": "colour"}
+    with pytest.raises(ConfigError, match="flip_choice"):
+        check_inference_overrides({"flip_choice": "coin"})
+
+
+def test_geometry_only_run_names_the_turn_by_the_model_colours(tmp_path):
+    """A geometry-only run (appearance=local) with flips on a quadrant-coloured box: inference names the turn
+    by colour (flip_choice auto), the canonical pose of the true pose is turned back to the true pose, and a
+    grey model (no colour to tell the turns apart) or flip_choice=classifier leaves it to the classifier."""
+    from types import SimpleNamespace
+
+    from sixdpose.datasets.readers import open_dataset
+    from sixdpose.pose.dense import canonical_flip, shape_flips, unflip
+    from sixdpose.pose.infer import Estimator
+    from sixdpose.pose.train import train_pose
+
+    ds, P = _box_dataset(tmp_path / "box", colours=True)
+    train_pose(ds, tmp_path / "r", profile="smoke", progress=False, **dict(DENSE, flips=4, appearance="local"))
+    ckpt = ck.load(tmp_path / "r" / ck.LAST)
+    assert ckpt["arch"]["appearance"] == "local" and not any(k.startswith("cnn.") for k in ckpt["model"])
+    reader = open_dataset(ds)
+    est = Estimator(tmp_path / "r", reader=reader, device="cpu")
+    assert est.colour_flips and est.settings()["colour_flips"]
+    fl = shape_flips(reader.model(2), 4)
+    rng = np.random.default_rng(2)
+    cols = _quadrant_colours(P)
+    named = set()
+    for e in range(4):  # poses in each of the box's turns: the canonical turn differs between them
+        R, t = Rotation.from_rotvec(rng.normal(size=3) * 0.4).as_matrix() @ fl.R[e], np.array([0.0, 0.01, 0.55])
+        p_C = P @ R.T + t
+        near = p_C[:, 2] < np.percentile(p_C[:, 2], 40)
+        inst = SimpleNamespace(obj_id=2, points=p_C[near], colors=cols[near])
+        d = canonical_flip(R, fl)
+        Rc, tc = R @ fl.R[d], R @ fl.t[d] + t  # what the fit of canonical coordinates gives
+        assert est._colour_flip(inst, Rc, tc, 0) == d
+        named.add(d)
+        Rb, tb = unflip(Rc, tc, fl.R[d], fl.t[d])
+        assert np.allclose(Rb, R, atol=1e-6) and np.allclose(tb, t, atol=1e-6)
+    assert len(named) > 1
+    by_classifier = Estimator(tmp_path / "r", reader=reader, device="cpu", overrides={"flip_choice": "classifier"})
+    assert not by_classifier.colour_flips
+    assert not Estimator(tmp_path / "r", device="cpu").colour_flips  # no reader: no model colours (a warning)
     _predict_proper_poses(ds, tmp_path / "r", tmp_path / "res.csv", 2, (0.4, 0.7))

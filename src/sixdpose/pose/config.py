@@ -41,6 +41,10 @@ TRANSLATIONS = ("absolute", "centroid_offset")
 ROTATIONS = ("quaternion", "6d")
 NORMS = ("none", "group", "batch")
 HEADS = ("paper", "dense")
+#: what the network sees of the image: the paper's CNN embedding, or nothing (geometry alone; dense head)
+APPEARANCES = ("cnn", "local", "none")
+#: how the dense head names a shape flip at inference (PoseConfig.flip_choice)
+FLIP_CHOICES = ("auto", "classifier", "colour")
 DENSE_LOSSES = ("densefusion", "decoupled")
 
 
@@ -97,6 +101,19 @@ class PoseConfig(FrameSchedule):
             points, names which turn is the true pose (cross-entropy weighted by ``flip_weight``); inference
             fits the canonical frame and applies the classified turn.
         flip_weight: weight of that classification loss beside the coordinate loss (metres).
+        appearance: what the per-point embedding fused with the points is: ``cnn`` (the paper: per-pixel
+            CNN embeddings of the image), ``local`` (the dense head on geometry alone: no CNN, the embedding
+            is the local shape around each point, two EdgeConv layers over its 16 nearest neighbours,
+            :class:`~sixdpose.pose.model.LocalGeometry`) or ``none`` (no CNN and a zero embedding: the plain
+            PointNet, an ablation). Without the CNN a run trains faster and what it learns from rendered
+            depth does not hinge on how rendered colours look, but a flip cannot be learnt (its turns differ
+            only in texture): use ``flips``, whose turn inference then names from the object model's colours
+            (``flip_choice``).
+        flip_choice: how inference names the shape flip (``flips`` > 0): ``classifier`` (the network's flip
+            classifier), ``colour`` (each turn of the fitted pose scored by how well the model's colours
+            agree with the masked points', :func:`~sixdpose.registration.verify.colour_scores`; the
+            classifier where the model has no colours) or ``auto`` (``colour`` without the CNN,
+            ``classifier`` with it).
 
     Data:
         num_points: masked pixels with valid depth sampled per instance (fewer: wrapped repeats).
@@ -141,6 +158,8 @@ class PoseConfig(FrameSchedule):
     ransac_iterations: int = bounded(128, min=1, max=100_000)
     flips: int = bounded(0, min=0, max=64)
     flip_weight: float = bounded(0.1, min=0, max=100)
+    appearance: str = "cnn"
+    flip_choice: str = "auto"
     rgb_noise: float = bounded(0.3, min=0, max=1)
     colour_jitter: float = bounded(0.0, min=0, max=1, max_open=True)
     mask_jitter_px: int = bounded(0, min=0, max=64)
@@ -166,6 +185,12 @@ class PoseConfig(FrameSchedule):
             raise ValueError(f"head must be one of {HEADS}, got {self.head!r}")
         if self.dense_loss not in DENSE_LOSSES:
             raise ValueError(f"dense_loss must be one of {DENSE_LOSSES}, got {self.dense_loss!r}")
+        if self.appearance not in APPEARANCES:
+            raise ValueError(f"appearance must be one of {APPEARANCES}, got {self.appearance!r}")
+        if self.appearance != "cnn" and self.head != "dense":
+            raise ValueError(f"appearance={self.appearance!r} needs head=dense, got head={self.head!r}")
+        if self.flip_choice not in FLIP_CHOICES:
+            raise ValueError(f"flip_choice must be one of {FLIP_CHOICES}, got {self.flip_choice!r}")
         if self.flips and self.head != "dense":
             raise ValueError(f"flips needs head=dense, got head={self.head!r}")
         if not self.ransac_threshold > 0 or self.ransac_iterations < 1:
@@ -182,6 +207,8 @@ class PoseConfig(FrameSchedule):
             arch["head"] = self.head
         if self.flips:  # likewise the dense head's without flips
             arch["flips"] = self.flips
+        if self.appearance != "cnn":  # likewise the networks with a CNN
+            arch["appearance"] = self.appearance
         return arch
 
 

@@ -91,7 +91,7 @@ def _orthonormalise(R: np.ndarray) -> np.ndarray:
 
 #: Fields of a pose run's :class:`~.config.PoseConfig` that ``predict-pose --set`` may change: they act
 #: on the points sampled per instance at inference, not on the network's shapes.
-INFERENCE_FIELDS = ("num_points", "min_points", "ransac_threshold", "ransac_iterations")
+INFERENCE_FIELDS = ("num_points", "min_points", "ransac_threshold", "ransac_iterations", "flip_choice")
 
 #: Smallest score of a verified pose (``predict-pose --verify`` writes the verification's score; the
 #: evaluation reads a score <= 0 as "no estimate", which a low verification score must not become).
@@ -208,9 +208,18 @@ class Estimator:
         self._diameters: dict[int, float] = {}
         self.score_thresh, self.seed, self.max_batch = score_thresh, seed, max_batch
         self._cache = None
-        if icp or colour_verify or verify:
-            if reader is None:
-                raise PoseError("ICP and colour verification need the dataset reader (its object models)")
+        if (icp or colour_verify or verify) and reader is None:
+            raise PoseError("ICP and colour verification need the dataset reader (its object models)")
+        # the dense head's flips named by the model's colours (flip_choice): needs the reader's models
+        choice = getattr(cfg, "flip_choice", "classifier")
+        if choice == "auto":
+            choice = "colour" if getattr(cfg, "appearance", "cnn") != "cnn" else "classifier"
+        self.colour_flips = bool(self.dense and getattr(net, "flips", 0) and choice == "colour")
+        if self.colour_flips and reader is None:
+            log.warning("flip_choice=colour needs the dataset reader (its models' colours): the flip classifier "
+                        "names the turns instead")
+            self.colour_flips = False
+        if icp or colour_verify or verify or self.colour_flips:
             from ..registration import ReferenceCache, get_preset
 
             self.reg_cfg = get_preset("default", verify=verify, **(reg_overrides or {}))
@@ -223,7 +232,7 @@ class Estimator:
             "refiner_run": self.refiner_ckpt["path"] if self.refiner_ckpt else None,
             "refiner_config": self.refiner_cfg.to_dict() if self.refiner_cfg else None,
             "iterations": self.iterations, "icp": self.icp, "colour_verify": self.colour_verify,
-            "verify": self.verify,
+            "verify": self.verify, "colour_flips": self.colour_flips,
             "verify_config": ({k: getattr(self.reg_cfg, k) for k in _verify_fields()} if self.verify else None),
             "score_thresh": self.score_thresh, "seed": self.seed, "device": str(self.device),
         }
@@ -252,7 +261,7 @@ class Estimator:
         else:
             items = [(d.obj_id, d.score, d.mask) for d in detections if d.score >= self.score_thresh]
         rng = np.random.default_rng([self.seed, int(sample.scene_id), int(sample.im_id)])
-        keep_points = self.icp or self.colour_verify or self.verify
+        keep_points = self.icp or self.colour_verify or self.verify or self.colour_flips
         rows: list[PoseEstimate | None] = [None] * len(items)
         usable = []
         for k, (oid, score, mask) in enumerate(items):
@@ -314,13 +323,33 @@ class Estimator:
         for k, (inst, y, c) in enumerate(zip(insts, coords, conf, strict=True)):
             R, t, _ = ransac_kabsch(y, inst.cloud, c, threshold=self.cfg.ransac_threshold,
                                     iterations=self.cfg.ransac_iterations, rng=rng)
-            if flip[k]:  # the coordinates are the canonical turn's: back to the classified turn
-                ci = int(batch["obj_index"][k])
-                R, t = unflip(R, t, self.net.flip_R[ci, flip[k]].double().cpu().numpy(),
-                              self.net.flip_t[ci, flip[k]].double().cpu().numpy())
+            ci = int(batch["obj_index"][k])
+            d = self._colour_flip(inst, R, t, ci) if self.colour_flips else None
+            d = int(flip[k]) if d is None else d
+            if d:  # the coordinates are the canonical turn's: back to the named turn
+                R, t = unflip(R, t, self.net.flip_R[ci, d].double().cpu().numpy(),
+                              self.net.flip_t[ci, d].double().cpu().numpy())
             Rs.append(R)
             ts.append(t)
         return np.stack(Rs), np.stack(ts)
+
+    def _colour_flip(self, inst, R: np.ndarray, t: np.ndarray, ci: int) -> int | None:
+        """The shape flip (index into the class's turns) whose pose agrees best with the instance's colours
+        (:func:`~sixdpose.registration.colour_scores` of every turn of the canonical pose ``(R, t)``), or None
+        (the classifier decides) when the class has one turn or the model no colours."""
+        from ..registration import colour_scores
+        from .dense import unflip
+
+        n = int(self.net.flip_n[ci])
+        if n < 2 or inst.points is None or inst.colors is None or self._cache is None:
+            return None
+        grid, _ = self._cache.colour_grid(inst.obj_id, self.reg_cfg.cv_grid_cells, self.reg_cfg.cv_smooth_rel)
+        if grid is None:
+            return None
+        cands = [X_from(R, t)] + [X_from(*unflip(R, t, self.net.flip_R[ci, d].double().cpu().numpy(),
+                                                  self.net.flip_t[ci, d].double().cpu().numpy())) for d in range(1, n)]
+        sc = colour_scores(np.stack(cands), inst.points, inst.colors, grid, self._diameter(inst.obj_id), self.reg_cfg)
+        return int(np.argmax(sc)) if np.isfinite(sc).any() else None
 
     def _diameter(self, obj_id: int) -> float:
         """The object's diameter in metres from the reader's model (0.0 without a reader): the depth band

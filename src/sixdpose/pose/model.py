@@ -171,6 +171,44 @@ class AttentionPool(nn.Module):
         return torch.einsum("ncp,np->nc", x, w), w
 
 
+class LocalGeometry(nn.Module):
+    """Per-point embedding of the local shape around each point (``appearance="local"``): two EdgeConv
+    layers (Wang et al. 2019, DGCNN) over the ``k`` nearest neighbours of every point in the sampled cloud,
+    ``max_j h([f_i, f_j - f_i])``, the second on the first's features. Unlike a plain PointNet, whose
+    per-point features know only where a point is, these tell a box's corner from its edge and face, so the
+    dense head can find correspondences without a global rotation.
+
+    Args: emb_dim (output channels), k (neighbours), width, norm as in :class:`PoseNet`.
+    Input (N, P, 3) centred cloud in units of ``OFFSET_SCALE``; output (N, emb_dim, P).
+    """
+
+    def __init__(self, emb_dim: int, k: int = 16, width: float = 1.0, norm: str = "none"):
+        super().__init__()
+        self.k = k
+        c = _ch(64, width)
+        self.edge1 = nn.Sequential(nn.Conv2d(6, c, 1), norm2d(norm, c), nn.ReLU(inplace=True),
+                                   nn.Conv2d(c, c, 1), norm2d(norm, c), nn.ReLU(inplace=True))
+        self.edge2 = nn.Sequential(nn.Conv2d(2 * c, c, 1), norm2d(norm, c), nn.ReLU(inplace=True))
+        self.out = nn.Conv1d(2 * c, emb_dim, 1)
+
+    @staticmethod
+    def _edges(f: torch.Tensor, idx: torch.Tensor, scale: float = 1.0) -> torch.Tensor:
+        """(N, C, P) features and (N, P, k) neighbour indices -> (N, 2C, P, k) ``[f_i, scale (f_j - f_i)]``."""
+        ft = f.transpose(1, 2)  # (N, P, C)
+        nb = ft[torch.arange(len(f), device=f.device)[:, None, None], idx].permute(0, 3, 1, 2)  # (N, C, P, k)
+        fi = f[:, :, :, None].expand_as(nb)
+        return torch.cat([fi, scale * (nb - fi)], dim=1)
+
+    def forward(self, cloud: torch.Tensor) -> torch.Tensor:  # noqa: D102
+        x = cloud.transpose(1, 2)  # (N, 3, P)
+        k = min(self.k, cloud.shape[1])
+        idx = torch.cdist(cloud, cloud).topk(k, dim=2, largest=False).indices  # (N, P, k), self included
+        # neighbour offsets are millimetres to centimetres: x5 brings them to the centred cloud's scale
+        f1 = self.edge1(self._edges(x, idx, 5.0)).max(dim=3).values
+        f2 = self.edge2(self._edges(f1, idx)).max(dim=3).values
+        return self.out(torch.cat([f1, f2], dim=1))
+
+
 class PoseNet(nn.Module):
     """The main network (see the module docstring).
 
@@ -179,7 +217,9 @@ class PoseNet(nn.Module):
             :class:`~sixdpose.pose.config.PoseConfig`. rotation: ``quaternion`` | ``6d``.
             translation: ``absolute`` | ``centroid_offset``. head: ``paper`` (the rotation and translation
             heads) or ``dense`` (per-point object coordinates and confidences, :mod:`sixdpose.pose.dense`;
-            ``rotation`` and ``translation`` are then unused).
+            ``rotation`` and ``translation`` are then unused). flips: room for each class's shape flips
+            (dense head). appearance: ``cnn`` (per-pixel CNN embeddings), ``local`` (no CNN: the
+            :class:`LocalGeometry` embedding) or ``none`` (no CNN, a zero embedding: the points alone).
     """
 
     flip_R: torch.Tensor
@@ -187,11 +227,16 @@ class PoseNet(nn.Module):
     flip_n: torch.Tensor
 
     def __init__(self, num_classes: int, width: float = 1.0, emb_dim: int = 32, norm: str = "none",
-                 rotation: str = "quaternion", translation: str = "absolute", head: str = "paper", flips: int = 0):
+                 rotation: str = "quaternion", translation: str = "absolute", head: str = "paper", flips: int = 0,
+                 appearance: str = "cnn"):
         super().__init__()
         self.num_classes, self.rotation, self.translation, self.head = num_classes, rotation, translation, head
         self.flips = flips if head == "dense" else 0
-        self.cnn = PSPNet(width, emb_dim, norm)
+        self.emb_dim, self.appearance = emb_dim, appearance
+        # appearance "none": geometry alone, no CNN (the embedding is zeros, see embed); "local": no CNN, the
+        # embedding is the local shape around each point (LocalGeometry)
+        self.cnn = PSPNet(width, emb_dim, norm) if appearance == "cnn" else None
+        self.local = LocalGeometry(emb_dim, width=width, norm=norm) if appearance == "local" else None
         c = lambda x: _ch(x, width)  # noqa: E731
         self.conv1, self.conv2 = _conv1d(3, c(64), norm), _conv1d(c(64), c(128), norm)
         self.e_conv1, self.e_conv2 = _conv1d(emb_dim, c(64), norm), _conv1d(c(64), c(128), norm)
@@ -249,8 +294,11 @@ class PoseNet(nn.Module):
             images: (B, 3, H, W) normalised images (full images or crops).
             img_index: (N,) long, the image of each instance. choose: (N, P) long flat pixel indices.
         Returns:
-            (N, emb_dim, P).
+            (N, emb_dim, P); zeros without a CNN (``appearance="none"``: the images are not read).
         """
+        if self.cnn is None:
+            return torch.zeros(choose.shape[0], self.emb_dim, choose.shape[1], device=choose.device,
+                               dtype=torch.float32)
         feat = self.cnn(images).flatten(2)  # (B, E, H*W)
         feat = feat[img_index]  # (N, E, HW)
         return torch.gather(feat, 2, choose[:, None, :].expand(-1, feat.shape[1], -1))
@@ -276,8 +324,11 @@ class PoseNet(nn.Module):
             object coordinates of the points (metres), ``conf_logit`` (N, P) and ``emb``; with flips also
             ``flip_logit`` (N, F), the logits of the class's flips, -inf past its count.
         """
-        emb = self.embed(images, img_index, choose)
         centroid = cloud.mean(dim=1)
+        if self.local is not None:
+            emb = self.local((cloud - centroid[:, None, :]) / OFFSET_SCALE)
+        else:
+            emb = self.embed(images, img_index, choose)
         if self.head == "dense":
             return self._dense(cloud, centroid, emb, obj_index)
         # centroid_offset: the centred cloud in units of OFFSET_SCALE (spread ~1, not ~0.05 m, so the
@@ -348,7 +399,7 @@ class Refiner(nn.Module):
 def build_posenet(cfg, num_classes: int) -> PoseNet:
     """The :class:`PoseNet` of a :class:`~sixdpose.pose.config.PoseConfig`."""
     return PoseNet(num_classes, cfg.width, cfg.emb_dim, cfg.norm, cfg.rotation, cfg.translation,
-                   getattr(cfg, "head", "paper"), getattr(cfg, "flips", 0))
+                   getattr(cfg, "head", "paper"), getattr(cfg, "flips", 0), getattr(cfg, "appearance", "cnn"))
 
 
 def build_refiner(cfg, num_classes: int, emb_dim: int) -> Refiner:

@@ -21,8 +21,9 @@ from .runner import RegistrationError, run_registration
 __all__ = [
     "METHODS", "PRESETS", "Frame", "ReferenceCache", "Registration", "RegistrationConfig", "RegistrationError",
     "estimate_pose", "get_preset", "kabsch_batch", "prepare_scene", "refine_icp", "refine_pose", "register_fgr",
-    "register_ransac", "register_super4pcs", "run_registration", "verify_hypotheses",
+    "register_ransac", "register_super4pcs", "run_registration", "verify_hypotheses", "colour_scores",
 ]
 
 # lazy: super4pcs imports scipy.spatial and hypotheses Numba, which building the CLI parser need not load
-__getattr__ = lazy_getattr(__name__, by_module(super4pcs=("kabsch_batch",), hypotheses=("Frame", "verify_hypotheses")))
+__getattr__ = lazy_getattr(__name__, by_module(super4pcs=("kabsch_batch",), hypotheses=("Frame", "verify_hypotheses"),
+                                                  verify=("colour_scores",)))

@@ -228,6 +228,57 @@ def _corr(fs: np.ndarray, fm: np.ndarray) -> np.ndarray:
     return num / den
 
 
+def colour_scores(
+    X_CO: np.ndarray,
+    points: np.ndarray,
+    colors: np.ndarray,
+    grid: ColourGrid,
+    diameter: float,
+    cfg: RegistrationConfig | None = None,
+) -> np.ndarray:
+    """Score given candidate poses by colour agreement, as the coarse pass of :func:`colour_search` does
+    (smoothed chromaticity, the wide surface term): for choosing among a few poses that geometry cannot
+    tell apart (a box's turns), without searching.
+
+    Args:
+        X_CO: (K, 4, 4) candidate poses (object in camera, metres). points, colors: (N, 3) masked scene
+            points (camera frame, m) and their colours in [0, 1]. grid: the object's :class:`ColourGrid`.
+            diameter: metres. cfg: as in :func:`colour_search` (``cv_points``, ``cv_smooth_rel``,
+            ``cv_coarse_sigma_rel``, ``cv_geo_weight``, ``seed``).
+    Returns:
+        (K,) ``col + cv_geo_weight * geo`` per candidate (higher is better); ``-inf`` for a candidate with
+        fewer than 4 of the points inside the model's grid.
+    """
+    if cfg is None:
+        from .presets import PRESETS
+
+        cfg = PRESETS["default"]
+    X = np.asarray(X_CO, dtype=np.float64).reshape(-1, 4, 4)
+    P = np.asarray(points, dtype=np.float64)
+    out = np.full(len(X), -np.inf)
+    if len(P) < 4 or len(colors) != len(P):
+        return out
+    rng = np.random.default_rng(cfg.seed)
+    sel = rng.choice(len(P), size=min(len(P), cfg.cv_points), replace=False)
+    ch = chroma(colors)
+    nb = cKDTree(P).query_ball_point(P[sel], cfg.cv_smooth_rel * diameter)
+    fs = np.array([ch[i].mean(axis=0) for i in nb])
+    fs -= fs.mean(axis=0)
+    c32 = grid.centroid.astype(np.float32)
+    weights = grid.weights(cfg.cv_coarse_sigma_rel * diameter)
+    geo, col = np.empty(1), np.empty(1)
+    for k, Xk in enumerate(X):
+        v = (P[sel] - Xk[:3, 3]) @ Xk[:3, :3] - grid.centroid
+        inside = np.linalg.norm(v, axis=1) < grid.radius
+        if inside.sum() < 4:
+            continue
+        _score_kernel(v[inside].astype(np.float32), np.eye(3, dtype=np.float32)[None], c32,
+                      grid.origin.astype(np.float32), np.float32(1.0 / grid.cell), int(grid.shape[1]),
+                      int(grid.shape[2]), weights, grid.smooth, fs[inside].astype(np.float32), geo, col)
+        out[k] = col[0] + cfg.cv_geo_weight * geo[0] * inside.mean()
+    return out
+
+
 @dataclass
 class SearchResult:
     """Output of :func:`colour_search`: ``X_CO`` (4, 4), ``geo``, ``col`` (sharp), ``changed``;
