@@ -112,10 +112,16 @@ def timed(fn, items, device) -> list[float]:
     return times
 
 
+#: the fields of a trained run's config that shape its training step (benchmarks/pose.py --pose times its own)
+STEP_FIELDS = ("head", "appearance", "width", "emb_dim", "crop", "norm", "translation", "rotation", "flips",
+               "num_points", "num_model_points", "batch_size")
+
+
 def train_throughput(profile: str, device, steps: int, inst_per_image: int = 6, classes: int = 21,
-                     head: str = "paper", appearance: str = "cnn") -> dict:
-    """Instances per second of optimiser steps of the main network and of the refiner (paper head)."""
-    cfg = profile_config(profile, {"head": head, "appearance": appearance})
+                     head: str = "paper", appearance: str = "cnn", overrides: dict | None = None) -> dict:
+    """Instances per second of optimiser steps of the main network and of the refiner (paper head);
+    ``overrides``: config fields replacing the profile's (a trained run's :data:`STEP_FIELDS`)."""
+    cfg = profile_config(profile, {"head": head, "appearance": appearance, **(overrides or {})})
     rcfg = refiner_profile_config(profile)
     torch.manual_seed(0)
     net = build_posenet(cfg, classes).to(device).train()
@@ -252,10 +258,11 @@ def main(argv=None) -> int:
     if device.type == "cuda" and not torch.cuda.is_available():
         print("CUDA is not available", file=sys.stderr)
         return 2
-    head, appearance = a.head, a.appearance
-    if a.pose:  # a trained run: its own head and embedding (for the training step timed too)
+    head, appearance, step_cfg = a.head, a.appearance, {}
+    if a.pose:  # a trained run: its own head, embedding and network (for the training step timed too)
         saved = ck.load(a.pose, kind="pose")["config"]
         head, appearance = saved.get("head", "paper"), saved.get("appearance", "cnn")
+        step_cfg = {k: saved[k] for k in STEP_FIELDS if k in saved}
     if a.result_name is None:
         look = "" if appearance == "cnn" else f"{appearance}_"
         a.result_name = f"pose_{a.profile}_{'dense_' if head == 'dense' else ''}{look}{device.type}"
@@ -269,7 +276,8 @@ def main(argv=None) -> int:
             out.update(end_to_end_fps(a.seg, pose, ref, a.data, device, a.frames))
         if device.type == "cuda":
             torch.cuda.reset_peak_memory_stats(device)
-        out.update(train_throughput(a.profile, device, a.steps, a.instances, head=head, appearance=appearance))
+        out.update(train_throughput(a.profile, device, a.steps, a.instances, head=head, appearance=appearance,
+                                    overrides=step_cfg))
         out["train_peak_mib"] = peak_mib(device)
     for k, v in out.items():
         print(f"{k:32s} {v:.2f}" if isinstance(v, float) else f"{k:32s} {v}")

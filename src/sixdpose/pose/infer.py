@@ -219,6 +219,10 @@ class Estimator:
             log.warning("flip_choice=colour needs the dataset reader (its models' colours): the flip classifier "
                         "names the turns instead")
             self.colour_flips = False
+        if self.colour_flips:  # compile the colour kernel now, not inside the first frame's time
+            from ..registration.verify import warmup
+
+            warmup()
         if icp or colour_verify or verify or self.colour_flips:
             from ..registration import ReferenceCache, get_preset
 

@@ -228,6 +228,10 @@ def _corr(fs: np.ndarray, fm: np.ndarray) -> np.ndarray:
     return num / den
 
 
+#: points pooled (at random) by :func:`colour_scores` for the scene's smoothed colours, and neighbours averaged
+SMOOTH_POOL, SMOOTH_K = 2000, 32
+
+
 def colour_scores(
     X_CO: np.ndarray,
     points: np.ndarray,
@@ -259,10 +263,16 @@ def colour_scores(
     if len(P) < 4 or len(colors) != len(P):
         return out
     rng = np.random.default_rng(cfg.seed)
-    sel = rng.choice(len(P), size=min(len(P), cfg.cv_points), replace=False)
-    ch = chroma(colors)
-    nb = cKDTree(P).query_ball_point(P[sel], cfg.cv_smooth_rel * diameter)
-    fs = np.array([ch[i].mean(axis=0) for i in nb])
+    # smoothed scene chromaticity at cv_points of them: the mean over the (up to) SMOOTH_K nearest of at most
+    # SMOOTH_POOL points within the smoothing radius (vectorised: milliseconds on a large mask)
+    pool = rng.choice(len(P), size=min(len(P), SMOOTH_POOL), replace=False)
+    sel = pool[: min(len(pool), cfg.cv_points)]
+    ch = chroma(colors)[pool]
+    k = min(SMOOTH_K, len(pool))
+    dist, nb = cKDTree(P[pool]).query(P[sel], k=k, distance_upper_bound=cfg.cv_smooth_rel * diameter)
+    dist, nb = dist.reshape(len(sel), k), nb.reshape(len(sel), k)
+    ok = np.isfinite(dist)  # the point itself is always among them
+    fs = (ch[np.where(ok, nb, 0)] * ok[..., None]).sum(axis=1) / ok.sum(axis=1, keepdims=True)
     fs -= fs.mean(axis=0)
     c32 = grid.centroid.astype(np.float32)
     weights = grid.weights(cfg.cv_coarse_sigma_rel * diameter)
