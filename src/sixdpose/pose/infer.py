@@ -220,9 +220,9 @@ class Estimator:
                         "names the turns instead")
             self.colour_flips = False
         if self.colour_flips:  # compile the colour kernel now, not inside the first frame's time
-            from ..registration.verify import warmup
+            from ..registration import warmup_colour
 
-            warmup()
+            warmup_colour()
         if icp or colour_verify or verify or self.colour_flips:
             from ..registration import ReferenceCache, get_preset
 

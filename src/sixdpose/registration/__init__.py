@@ -22,8 +22,17 @@ __all__ = [
     "METHODS", "PRESETS", "Frame", "ReferenceCache", "Registration", "RegistrationConfig", "RegistrationError",
     "estimate_pose", "get_preset", "kabsch_batch", "prepare_scene", "refine_icp", "refine_pose", "register_fgr",
     "register_ransac", "register_super4pcs", "run_registration", "verify_hypotheses", "colour_scores",
+    "warmup_colour",
 ]
 
 # lazy: super4pcs imports scipy.spatial and hypotheses Numba, which building the CLI parser need not load
 __getattr__ = lazy_getattr(__name__, by_module(super4pcs=("kabsch_batch",), hypotheses=("Frame", "verify_hypotheses"),
                                                   verify=("colour_scores",)))
+
+
+def warmup_colour() -> None:
+    """Compile the colour-scoring kernel of :func:`colour_scores` and the colour search now (or load it from
+    Numba's on-disk cache): a start-up cost, so that the first instance's time is not charged with it."""
+    from .verify import warmup
+
+    warmup()
