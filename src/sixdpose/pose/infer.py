@@ -313,7 +313,7 @@ class Estimator:
         """Poses of a dense-head batch: per-point object coordinates and confidences from the network, then
         :func:`~sixdpose.pose.dense.ransac_kabsch` of the coordinates onto each instance's sampled cloud.
         Returns ``(R (N, 3, 3), t (N, 3))`` float64, ``X_CO`` in metres."""
-        from .dense import ransac_kabsch, unflip
+        from .dense import ransac_kabsch
 
         dev = self.device
         with torch.no_grad(), torch.autocast("cuda", dtype=torch.float16, enabled=dev.type == "cuda"):
@@ -331,18 +331,23 @@ class Estimator:
             d = self._colour_flip(inst, R, t, ci) if self.colour_flips else None
             d = int(flip[k]) if d is None else d
             if d:  # the coordinates are the canonical turn's: back to the named turn
-                R, t = unflip(R, t, self.net.flip_R[ci, d].double().cpu().numpy(),
-                              self.net.flip_t[ci, d].double().cpu().numpy())
+                R, t = self._turned(R, t, ci, d)
             Rs.append(R)
             ts.append(t)
         return np.stack(Rs), np.stack(ts)
+
+    def _turned(self, R: np.ndarray, t: np.ndarray, ci: int, d: int) -> tuple[np.ndarray, np.ndarray]:
+        """The canonical pose ``(R, t)`` of class ``ci`` mapped back by its flip ``d`` (:func:`~.dense.unflip`)."""
+        from .dense import unflip
+
+        return unflip(R, t, self.net.flip_R[ci, d].double().cpu().numpy(),
+                      self.net.flip_t[ci, d].double().cpu().numpy())
 
     def _colour_flip(self, inst, R: np.ndarray, t: np.ndarray, ci: int) -> int | None:
         """The shape flip (index into the class's turns) whose pose agrees best with the instance's colours
         (:func:`~sixdpose.registration.colour_scores` of every turn of the canonical pose ``(R, t)``), or None
         (the classifier decides) when the class has one turn or the model no colours."""
         from ..registration import colour_scores
-        from .dense import unflip
 
         n = int(self.net.flip_n[ci])
         if n < 2 or inst.points is None or inst.colors is None or self._cache is None:
@@ -350,8 +355,7 @@ class Estimator:
         grid, _ = self._cache.colour_grid(inst.obj_id, self.reg_cfg.cv_grid_cells, self.reg_cfg.cv_smooth_rel)
         if grid is None:
             return None
-        cands = [X_from(R, t)] + [X_from(*unflip(R, t, self.net.flip_R[ci, d].double().cpu().numpy(),
-                                                  self.net.flip_t[ci, d].double().cpu().numpy())) for d in range(1, n)]
+        cands = [X_from(R, t)] + [X_from(*self._turned(R, t, ci, d)) for d in range(1, n)]
         sc = colour_scores(np.stack(cands), inst.points, inst.colors, grid, self._diameter(inst.obj_id), self.reg_cfg)
         return int(np.argmax(sc)) if np.isfinite(sc).any() else None
 
