@@ -491,6 +491,15 @@ def test_geometry_only_network_has_no_cnn_and_config_checks():
     e2 = loc(None, None, torch.zeros(1, 40, dtype=torch.long), cloud[:, perm], torch.tensor([0]))["emb"]
     assert e1.shape == (1, loc.emb_dim, 40) and e1.abs().sum() > 0
     assert torch.allclose(e1[..., perm], e2, atol=1e-5)
+    # appearance=local_rgb: the points' pixel colours join the local shape; a uniform exposure change of the
+    # image does not change the embedding (colours standardised per instance), a different pattern does
+    rgb = PoseNet(2, width=1 / 16, head="dense", appearance="local_rgb").eval()
+    assert rgb.cnn is None and rgb.local is not None and rgb.local.colour
+    img = torch.rand(1, 3, 8, 8)
+    choose = torch.randint(0, 64, (1, 40))
+    run = lambda im: rgb(im, torch.tensor([0]), choose, cloud, torch.tensor([0]))["emb"]  # noqa: E731
+    assert torch.allclose(run(img), run(1.7 * img - 0.2), atol=3e-3)
+    assert not torch.allclose(run(img), run(img.flip(1)), atol=3e-2)
     with pytest.raises(ValueError, match="needs head=dense"):
         PoseConfig(appearance="none").validate()
     with pytest.raises(ValueError, match="appearance must be one of"):

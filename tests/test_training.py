@@ -357,3 +357,27 @@ def test_a_damaged_run_directory_is_one_line(pose_ds, tmp_path, capsys, name, ho
     else:
         lines = [ln for ln in err.strip().splitlines() if ln.startswith("sixdpose")]
         assert rc == 2 and len(lines) == 1 and name in lines[0], err
+
+
+def test_weight_average_is_the_final_model_and_resumes(pose_ds, tmp_path):
+    """ema_decay > 0: model.pt holds the averaged weights (not the last step's), last.pt keeps both, and a run
+    killed in its second epoch resumes to the same averaged model as the uninterrupted one."""
+    from sixdpose.pose.train import train_pose
+
+    ov = dict(epochs=2, repeat=2, batch_size=2, ema_decay=0.8)
+    ref = tmp_path / "ref"
+    s = train_pose(pose_ds, ref, profile="smoke", progress=False, **ov)
+    last, final = _checkpoint(ref / "last.pt"), _checkpoint(ref / "model.pt")
+    _assert_same_state(final["model"], last["ema"])
+    params = [k for k, v in last["model"].items() if v.is_floating_point() and "weight" in k]
+    assert params and any(not torch.equal(final["model"][k], last["model"][k]) for k in params)
+    run = tmp_path / "run"
+    with pytest.raises(Interrupt):
+        train_pose(pose_ds, run, profile="smoke", progress=False, after_step=_interrupt_at(s["steps"] // 2 + 1), **ov)
+    train_pose(pose_ds, run, resume=True, progress=False)
+    _assert_same_state(_checkpoint(ref / "model.pt")["model"], _checkpoint(run / "model.pt")["model"])
+    # without it the final weights are the last step's
+    plain = tmp_path / "plain"
+    train_pose(pose_ds, plain, profile="smoke", progress=False, **dict(ov, ema_decay=0.0))
+    assert "ema" not in _checkpoint(plain / "last.pt")
+    _assert_same_state(_checkpoint(plain / "model.pt")["model"], _checkpoint(plain / "last.pt")["model"])

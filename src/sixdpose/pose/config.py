@@ -42,7 +42,7 @@ ROTATIONS = ("quaternion", "6d")
 NORMS = ("none", "group", "batch")
 HEADS = ("paper", "dense")
 #: what the network sees of the image: the paper's CNN embedding, or nothing (geometry alone; dense head)
-APPEARANCES = ("cnn", "local", "none")
+APPEARANCES = ("cnn", "local", "local_rgb", "none")
 #: how the dense head names a shape flip at inference (PoseConfig.flip_choice)
 FLIP_CHOICES = ("auto", "classifier", "colour")
 DENSE_LOSSES = ("densefusion", "decoupled")
@@ -104,11 +104,12 @@ class PoseConfig(FrameSchedule):
         appearance: what the per-point embedding fused with the points is: ``cnn`` (the paper: per-pixel
             CNN embeddings of the image), ``local`` (the dense head on geometry alone: no CNN, the embedding
             is the local shape around each point, two EdgeConv layers over its 16 nearest neighbours,
-            :class:`~sixdpose.pose.model.LocalGeometry`) or ``none`` (no CNN and a zero embedding: the plain
-            PointNet, an ablation). Without the CNN a run trains faster and what it learns from rendered
-            depth does not hinge on how rendered colours look, but a flip cannot be learnt (its turns differ
-            only in texture): use ``flips``, whose turn inference then names from the object model's colours
-            (``flip_choice``).
+            :class:`~sixdpose.pose.model.LocalGeometry`), ``local_rgb`` (that embedding with each point's pixel
+            colour, standardised per instance, in its first layer: the local texture without a CNN) or
+            ``none`` (no CNN and a zero embedding: the plain PointNet, an ablation). Without the CNN a run
+            trains faster and what it learns from rendered depth does not hinge on how rendered colours look,
+            but a flip cannot be learnt from geometry (its turns differ only in texture): use ``flips``, whose
+            turn inference then names from the object model's colours (``flip_choice``).
         flip_choice: how inference names the shape flip (``flips`` > 0): ``classifier`` (the network's flip
             classifier), ``colour`` (each turn of the fitted pose scored by how well the model's colours
             agree with the masked points', :func:`~sixdpose.registration.verify.colour_scores`; the

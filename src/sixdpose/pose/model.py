@@ -171,6 +171,14 @@ class AttentionPool(nn.Module):
         return torch.einsum("ncp,np->nc", x, w), w
 
 
+def standardise_colours(colours: torch.Tensor, eps: float = 1e-3) -> torch.Tensor:
+    """Per-instance standardised point colours: (N, 3, P) -> (N, 3, P), each instance's mean colour removed
+    and divided by one spread over its three channels, so a brighter or dimmer exposure (a real camera's
+    against the renderer's) gives the same input while the contrast between channels (the hue) is kept."""
+    c = colours - colours.mean(dim=2, keepdim=True)
+    return c / (c.pow(2).mean(dim=(1, 2), keepdim=True).sqrt() + eps)
+
+
 class LocalGeometry(nn.Module):
     """Per-point embedding of the local shape around each point (``appearance="local"``): two EdgeConv
     layers (Wang et al. 2019, DGCNN) over the ``k`` nearest neighbours of every point in the sampled cloud,
@@ -178,15 +186,20 @@ class LocalGeometry(nn.Module):
     per-point features know only where a point is, these tell a box's corner from its edge and face, so the
     dense head can find correspondences without a global rotation.
 
-    Args: emb_dim (output channels), k (neighbours), width, norm as in :class:`PoseNet`.
-    Input (N, P, 3) centred cloud in units of ``OFFSET_SCALE``; output (N, emb_dim, P).
+    With ``colour=True`` (``appearance="local_rgb"``) each point also carries its pixel's colour, standardised
+    per instance (:func:`standardise_colours`), and the first layer sees ``[c_i, c_j - c_i]`` beside the
+    geometry: the local texture pattern (a letter's edge, a label's border) without a CNN over the image.
+
+    Args: emb_dim (output channels), k (neighbours), width, norm as in :class:`PoseNet`; colour.
+    Input (N, P, 3) centred cloud in units of ``OFFSET_SCALE`` (and (N, 3, P) colours with ``colour``);
+    output (N, emb_dim, P).
     """
 
-    def __init__(self, emb_dim: int, k: int = 16, width: float = 1.0, norm: str = "none"):
+    def __init__(self, emb_dim: int, k: int = 16, width: float = 1.0, norm: str = "none", colour: bool = False):
         super().__init__()
-        self.k = k
+        self.k, self.colour = k, colour
         c = _ch(64, width)
-        self.edge1 = nn.Sequential(nn.Conv2d(6, c, 1), norm2d(norm, c), nn.ReLU(inplace=True),
+        self.edge1 = nn.Sequential(nn.Conv2d(12 if colour else 6, c, 1), norm2d(norm, c), nn.ReLU(inplace=True),
                                    nn.Conv2d(c, c, 1), norm2d(norm, c), nn.ReLU(inplace=True))
         self.edge2 = nn.Sequential(nn.Conv2d(2 * c, c, 1), norm2d(norm, c), nn.ReLU(inplace=True))
         self.out = nn.Conv1d(2 * c, emb_dim, 1)
@@ -199,12 +212,17 @@ class LocalGeometry(nn.Module):
         fi = f[:, :, :, None].expand_as(nb)
         return torch.cat([fi, scale * (nb - fi)], dim=1)
 
-    def forward(self, cloud: torch.Tensor) -> torch.Tensor:  # noqa: D102
+    def forward(self, cloud: torch.Tensor, colours: torch.Tensor | None = None) -> torch.Tensor:  # noqa: D102
         x = cloud.transpose(1, 2)  # (N, 3, P)
         k = min(self.k, cloud.shape[1])
         idx = torch.cdist(cloud, cloud).topk(k, dim=2, largest=False).indices  # (N, P, k), self included
         # neighbour offsets are millimetres to centimetres: x5 brings them to the centred cloud's scale
-        f1 = self.edge1(self._edges(x, idx, 5.0)).max(dim=3).values
+        e = self._edges(x, idx, 5.0)
+        if self.colour:
+            if colours is None:
+                raise ValueError("LocalGeometry(colour=True) needs the points' colours")
+            e = torch.cat([e, self._edges(colours, idx)], dim=1)
+        f1 = self.edge1(e).max(dim=3).values
         f2 = self.edge2(self._edges(f1, idx)).max(dim=3).values
         return self.out(torch.cat([f1, f2], dim=1))
 
@@ -219,7 +237,8 @@ class PoseNet(nn.Module):
             heads) or ``dense`` (per-point object coordinates and confidences, :mod:`sixdpose.pose.dense`;
             ``rotation`` and ``translation`` are then unused). flips: room for each class's shape flips
             (dense head). appearance: ``cnn`` (per-pixel CNN embeddings), ``local`` (no CNN: the
-            :class:`LocalGeometry` embedding) or ``none`` (no CNN, a zero embedding: the points alone).
+            :class:`LocalGeometry` embedding), ``local_rgb`` (the same with each point's colour) or ``none``
+            (no CNN, a zero embedding: the points alone).
     """
 
     flip_R: torch.Tensor
@@ -236,7 +255,8 @@ class PoseNet(nn.Module):
         # appearance "none": geometry alone, no CNN (the embedding is zeros, see embed); "local": no CNN, the
         # embedding is the local shape around each point (LocalGeometry)
         self.cnn = PSPNet(width, emb_dim, norm) if appearance == "cnn" else None
-        self.local = LocalGeometry(emb_dim, width=width, norm=norm) if appearance == "local" else None
+        self.local = (LocalGeometry(emb_dim, width=width, norm=norm, colour=appearance == "local_rgb")
+                      if appearance in ("local", "local_rgb") else None)
         c = lambda x: _ch(x, width)  # noqa: E731
         self.conv1, self.conv2 = _conv1d(3, c(64), norm), _conv1d(c(64), c(128), norm)
         self.e_conv1, self.e_conv2 = _conv1d(emb_dim, c(64), norm), _conv1d(c(64), c(128), norm)
@@ -326,7 +346,11 @@ class PoseNet(nn.Module):
         """
         centroid = cloud.mean(dim=1)
         if self.local is not None:
-            emb = self.local((cloud - centroid[:, None, :]) / OFFSET_SCALE)
+            colours = None
+            if self.local.colour:  # the sampled pixels' colours, gathered from the (normalised) crops
+                img = images.flatten(2)[img_index]  # (N, 3, HW)
+                colours = standardise_colours(torch.gather(img, 2, choose[:, None, :].expand(-1, 3, -1)))
+            emb = self.local((cloud - centroid[:, None, :]) / OFFSET_SCALE, colours)
         else:
             emb = self.embed(images, img_index, choose)
         if self.head == "dense":

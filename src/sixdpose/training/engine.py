@@ -22,6 +22,9 @@ everything else, the same way for all:
   scaler skips the update with a warning, and :data:`MAX_SKIPPED` such steps in a row are an error;
 * budget: ``time_budget`` seconds (summed over resumes) checked after every step; once spent, the
   epoch ends, is checkpointed and training stops with the final model;
+* weight average (``ema_decay`` > 0): an exponential moving average of the parameters after every step
+  (:func:`~sixdpose.training.schedule.ema_momentum`), saved in ``last.pt`` as ``ema`` (resumed with it) and
+  written as ``model.pt``'s weights; the per-epoch validation scores the raw weights;
 * outputs (rank 0 alone writes): ``metrics.csv`` rows, ``last.pt`` after every epoch, ``model.pt``
   at the end, ``status.json`` and ``run.json``; a rank-0 setup error is raised on every rank.
 
@@ -67,7 +70,7 @@ from .rundir import (
     repair_metrics,
     write_status,
 )
-from .schedule import TrainSchedule, learning_rate
+from .schedule import TrainSchedule, ema_momentum, learning_rate
 
 log = logging.getLogger("sixdpose.training")
 
@@ -279,6 +282,12 @@ def _train(task, run_dir, resume, profile, cfg, overrides, dev, world, rank, pro
             torch.manual_seed(cfg.seed + 7919 * (rank + 1) + start_epoch)
         if rank == 0:
             log.warning("resuming %s at epoch %d of %d", run_dir, start_epoch + 1, cfg.epochs)
+    ema = None
+    if cfg.ema_decay > 0:  # the averaged weights (parameters averaged, buffers copied), resumed from last.pt
+        ema = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        if last is not None and "ema" in last:
+            ema.update({k: v.to(ema[k].device) for k, v in last["ema"].items() if k in ema})
+        averaged = {k for k, _ in model.named_parameters()}
     fields = ("epoch", "step", "lr", "loss") + tuple(task.loss_fields) + tuple(task.val_fields) + ("seconds",)
     if rank == 0:
         write_status(run_dir, finished=False, epoch=start_epoch, epochs=cfg.epochs, data=location,
@@ -294,10 +303,26 @@ def _train(task, run_dir, resume, profile, cfg, overrides, dev, world, rank, pro
 
     def payload(epoch: int, final: bool, states=None) -> dict:
         d = dict(task.checkpoint_header(cfg))
-        d.update(epoch=epoch, global_step=global_step, elapsed=elapsed, model=model.state_dict())
+        weights = model.state_dict()
+        if ema is not None and final:
+            weights = {k: ema[k].clone() for k in weights}
+        d.update(epoch=epoch, global_step=global_step, elapsed=elapsed, model=weights)
         if not final:
             d.update(optimizer=opt.state_dict(), scaler=scaler.state_dict(), rng=states, world_size=world)
+            if ema is not None:
+                d["ema"] = ema
         return d
+
+    def update_ema() -> None:
+        if ema is None:
+            return
+        m = ema_momentum(cfg.ema_decay, global_step)
+        with torch.no_grad():
+            for k, v in model.state_dict().items():
+                if k in averaged and v.is_floating_point():
+                    ema[k].mul_(m).add_(v.detach(), alpha=1.0 - m)
+                else:
+                    ema[k].copy_(v)
 
     epoch_means, steps_run, val, stopped_early, skipped = [], 0, {}, False, 0
     done = start_epoch
@@ -351,6 +376,7 @@ def _train(task, run_dir, resume, profile, cfg, overrides, dev, world, rank, pro
                 torch.nn.utils.clip_grad_norm_(params, cfg.grad_clip)
             scaler.step(opt)
             scaler.update()
+            update_ema()
             losses.append(vals[0])
             global_step += 1
             steps_run += 1

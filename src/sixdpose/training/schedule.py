@@ -34,6 +34,11 @@ class TrainSchedule(Config):
         seed: initialisation, shuffling, sampling and augmentation.
         num_workers: data-loading worker processes. num_threads: torch CPU threads (0: torch default).
         log_every: steps between rows of ``metrics.csv``.
+        ema_decay: exponential moving average of the weights (0: off). With ``d`` > 0 the engine keeps
+            ``w_ema <- m w_ema + (1 - m) w`` after every step, ``m = min(d, (1 + n) / (10 + n))`` at global
+            step ``n`` (the usual warm-up), buffers copied; ``model.pt`` holds the averaged weights and
+            ``last.pt`` both (its ``model`` the raw ones, to resume). It evens out the step-to-step wander
+            of a small-batch run, so the final model depends less on where the budget stops it.
     """
 
     epochs: int = bounded(100, min=1, max=100_000)
@@ -51,6 +56,13 @@ class TrainSchedule(Config):
     num_workers: int = bounded(2, min=0, max=256)
     num_threads: int = bounded(0, min=0, max=1024)
     log_every: int = bounded(10, min=1, max=1_000_000)
+    ema_decay: float = bounded(0.0, min=0, max=1, max_open=True)
+
+
+def ema_momentum(decay: float, step: int) -> float:
+    """Momentum of the weight average after global step ``step`` (0-based): ``min(decay, (1 + step) / (10 +
+    step))``, so the first steps' random initial weights fade fast (:attr:`TrainSchedule.ema_decay`)."""
+    return min(decay, (1.0 + step) / (10.0 + step))
 
 
 def learning_rate(cfg: TrainSchedule, epoch: int, step: int) -> float:
