@@ -16,7 +16,7 @@ below that baseline on its own training frames is underfitting, whatever its pos
 
 ``--data`` must hold models of the run's objects. Prints one table per run and dataset; ``--result NAME``
 also writes them as ``results/NAME.json`` (rows: run, data, obj_id, n, network_mm, constant_mm, ratio,
-flip_right).
+flip_right); ``--keep`` keeps that file's rows of the runs not measured this time.
 """
 
 from __future__ import annotations
@@ -114,6 +114,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--result", default=None, help="also write results/<RESULT>.json (one row per run, data, object)")
     ap.add_argument("--results-dir", default="results")
+    ap.add_argument("--keep", action="store_true",
+                    help="with --result: keep the rows already there of the runs not given this time (placed first)")
     a = ap.parse_args()
     table = []
     for spec in a.pose:
@@ -130,7 +132,15 @@ def main() -> None:
                       f"  {r['flip_right']}")
             table += [{"run": label, "data": dlabel, **r} for r in rows]
     if a.result:
+        import json
+        from pathlib import Path
+
         from sixdpose.artifacts.results import write_result
+
+        old = Path(a.results_dir, f"{a.result}.json")
+        if a.keep and old.is_file():
+            given = {r["run"] for r in table}
+            table = [r for r in json.loads(old.read_text())["rows"] if r.get("run") not in given] + table
 
         print(write_result(a.result, table, results_dir=a.results_dir,
                            units={"network_mm": "mm", "constant_mm": "mm", "n": "instances"},
