@@ -54,7 +54,7 @@ class FrameSchedule(TrainSchedule):
     :class:`PoseConfig` and :class:`RefinerConfig`, where the fields are described).
 
     Schedule: epochs, batch_size, lr, warmup_steps, lr_step_epochs, lr_gamma, weight_decay, grad_clip,
-        amp, time_budget, max_steps_per_epoch, seed, num_workers, num_threads, log_every
+        amp, time_budget, max_steps_per_epoch, seed, num_workers, num_threads, log_every, ema_decay
         (:class:`~sixdpose.training.schedule.TrainSchedule`).
     Frames: num_points, num_model_points, min_points, max_images, repeat.
     Model: width (channel multiplier, > 0).
@@ -140,7 +140,7 @@ class PoseConfig(FrameSchedule):
         lr_step_epochs and lr_gamma (learning rate x lr_gamma every lr_step_epochs epochs; 5 here),
         weight_decay, grad_clip, amp, time_budget (seconds; once spent the epoch is validated and
         checkpointed as done and training stops), max_steps_per_epoch, seed, num_workers,
-        num_threads, log_every.
+        num_threads, log_every, ema_decay (the weight average, 0: off).
 
     Misc:
         profile: the profile the config came from.
@@ -228,7 +228,7 @@ class RefinerConfig(FrameSchedule):
     Schedule (:class:`~sixdpose.training.schedule.TrainSchedule`, its defaults: lr 1e-3, no warm-up,
         x0.6 every 10 epochs): epochs, batch_size, lr, warmup_steps, lr_step_epochs, lr_gamma,
         weight_decay, grad_clip, amp, time_budget, max_steps_per_epoch, seed, num_workers,
-        num_threads, log_every.
+        num_threads, log_every, ema_decay (the weight average, 0: off).
     Misc: profile as in :class:`PoseConfig`.
     """
 

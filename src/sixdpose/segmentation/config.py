@@ -66,7 +66,7 @@ class SegConfig(TrainSchedule):
         batch_size (images per step and process; 4 here), lr, warmup_steps, lr_step_epochs and
         lr_gamma (x0.1 every 30 epochs here, the paper's decay), weight_decay, grad_clip (10 here),
         amp, time_budget, max_steps_per_epoch, seed (also the split), num_workers, num_threads,
-        log_every (1 here).
+        log_every (1 here), ema_decay (the weight average, 0: off).
 
     Data:
         val_fraction: share of synthetic images held out for testing (seeded random split).
