@@ -171,6 +171,13 @@ class AttentionPool(nn.Module):
         return torch.einsum("ncp,np->nc", x, w), w
 
 
+def gather_points(maps: torch.Tensor, img_index: torch.Tensor, choose: torch.Tensor) -> torch.Tensor:
+    """Per-pixel maps at the sampled pixels: (B, C, H, W) maps (CNN features or the images themselves),
+    (N,) long image of each instance, (N, P) long flat pixel indices -> (N, C, P)."""
+    flat = maps.flatten(2)[img_index]  # (N, C, HW)
+    return torch.gather(flat, 2, choose[:, None, :].expand(-1, flat.shape[1], -1))
+
+
 def standardise_colours(colours: torch.Tensor, eps: float = 1e-3) -> torch.Tensor:
     """Per-instance standardised point colours: (N, 3, P) -> (N, 3, P), each instance's mean colour removed
     and divided by one spread over its three channels, so a brighter or dimmer exposure (a real camera's
@@ -253,7 +260,7 @@ class PoseNet(nn.Module):
         self.flips = flips if head == "dense" else 0
         self.emb_dim, self.appearance = emb_dim, appearance
         # appearance "none": geometry alone, no CNN (the embedding is zeros, see embed); "local": no CNN, the
-        # embedding is the local shape around each point (LocalGeometry)
+        # embedding is the local shape around each point (LocalGeometry); "local_rgb": that with point colours
         self.cnn = PSPNet(width, emb_dim, norm) if appearance == "cnn" else None
         self.local = (LocalGeometry(emb_dim, width=width, norm=norm, colour=appearance == "local_rgb")
                       if appearance in ("local", "local_rgb") else None)
@@ -319,9 +326,7 @@ class PoseNet(nn.Module):
         if self.cnn is None:
             return torch.zeros(choose.shape[0], self.emb_dim, choose.shape[1], device=choose.device,
                                dtype=torch.float32)
-        feat = self.cnn(images).flatten(2)  # (B, E, H*W)
-        feat = feat[img_index]  # (N, E, HW)
-        return torch.gather(feat, 2, choose[:, None, :].expand(-1, feat.shape[1], -1))
+        return gather_points(self.cnn(images), img_index, choose)
 
     def fuse(self, cloud: torch.Tensor, emb: torch.Tensor) -> torch.Tensor:
         """Dense fusion: cloud (N, P, 3) and embedding (N, E, P) -> (N, 1408*w, P) per-point features."""
@@ -348,8 +353,7 @@ class PoseNet(nn.Module):
         if self.local is not None:
             colours = None
             if self.local.colour:  # the sampled pixels' colours, gathered from the (normalised) crops
-                img = images.flatten(2)[img_index]  # (N, 3, HW)
-                colours = standardise_colours(torch.gather(img, 2, choose[:, None, :].expand(-1, 3, -1)))
+                colours = standardise_colours(gather_points(images, img_index, choose))
             emb = self.local((cloud - centroid[:, None, :]) / OFFSET_SCALE, colours)
         else:
             emb = self.embed(images, img_index, choose)
