@@ -1,9 +1,10 @@
 """A learned pose run on the real YCB-Video sample, leave-one-scene-out: alone, + ICP, + verification.
 
 For each pose run given (``--pose LABEL=RUN_DIR``, repeatable) and each variant (alone, ``--icp``,
-``--verify``, ``--icp --verify``, and ``--icp --colour-verify --verify`` with the wider verification
-settings of :data:`WIDE`) this runs, unless its CSV is already there (so an interrupted collection
-resumes)::
+``--verify``, ``--icp --verify``, ``--icp --colour-verify --verify`` with the wider verification
+settings of :data:`WIDE`, and the cascade ``--icp --verify --fallback ransac``: RANSAC of the ``fast``
+preset, verified, for the instances whose verified learned pose scores below ``verify_retry_below``)
+this runs, unless its CSV is already there (so an interrupted collection resumes)::
 
     sixdpose predict-pose --pose RUN --data ../shared/data/ycbv_sample --split train_real --masks gt \\
         [--icp] [--colour-verify] [--verify] [--set ...] --out <work>/<label>_<variant>.csv
@@ -50,7 +51,9 @@ WIDE = ["--set", "verify_near_symmetries=6", "--set", "verify_detail_share=0.5",
 VARIANTS = [("alone", "alone", []), ("+ ICP", "icp", ["--icp"]), ("+ verify", "verify", ["--verify"]),
             ("+ ICP + verify", "icp_verify", ["--icp", "--verify"]),
             ("+ ICP + colour search + wide verify", "icp_colour_verify_wide",
-             ["--icp", "--colour-verify", "--verify", *WIDE])]
+             ["--icp", "--colour-verify", "--verify", *WIDE]),
+            ("+ ICP + verify, RANSAC (fast) below 0.6", "icp_verify_fallback_ransac",
+             ["--icp", "--verify", "--fallback", "ransac"])]
 SYMMETRIC_IDS = "1,13,14,16,18,19,20,21"
 #: the merged variant: the ``+ ICP + verify`` CSV and this hybrid method's (``register``, verified, one
 #: process) merged per instance by their verification scores (``sixdpose merge-results``)

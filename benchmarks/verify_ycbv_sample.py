@@ -8,13 +8,21 @@ Reads the evaluations of the results CSVs made by (for M in super4pcs, ransac, f
     sixdpose evaluate --data ../shared/data/ycbv_sample --split train_real --symmetric-ids \\
         1,13,14,16,18,19,20,21 --min-px 0 --no-bop --results <csv> --out runs/verify/<stem>_eval_<all|0|1>
 
+and, with ``--pose RUN`` (a dense pose run trained on generated data only), the cascade of the learned pose
+and the hybrid method (:data:`CASCADE`: the network's pose, ICP, verification; RANSAC of the ``fast`` preset,
+verified, for the instances whose verified score is below ``verify_retry_below``, 0.6), pinned to one core::
+
+    taskset -c 0 sixdpose predict-pose --pose RUN --data ../shared/data/ycbv_sample --split train_real \
+        --masks gt --icp --verify --fallback ransac --threads 1 --set ransac_threshold=0.06 --out <csv>
+
 (the ``_0`` / ``_1`` evaluations on the CSV's rows of scene 000000 / 000001) and writes the result
 artifacts ``results/verify_ycbv_sample.json`` (one row per method and switch) and
 ``results/verify_ycbv_sample_per_object.json`` (one row per scene and object). ``--figure PNG`` also draws
 accuracy against instances per second per core (one register process: per core) from the first artifact
 (``--figure-only``: from the committed artifact, without the runs).
 
-    python benchmarks/verify_ycbv_sample.py [--run] [--runs runs/verify] [--figure figures/verify_ycbv_sample.png]
+    python benchmarks/verify_ycbv_sample.py [--run] [--pose RUN] [--runs runs/verify] \
+        [--figure figures/verify_ycbv_sample.png]
 
 ``--run`` first runs those commands (a results CSV already there is kept: delete it to measure again), so
 on an otherwise idle machine the speed column is one core's.
@@ -42,22 +50,32 @@ RUNS = [
     ("FGR + ICP", "fgr", True, "final_fgr_icp_verify", "default"),
 ]
 
+#: the cascade row (``--pose``): (method label, results CSV stem, predict-pose switches); the pose run's
+#: directory name is added to the label
+CASCADE = ("learned + ICP, RANSAC (fast) below 0.6", "cascade_learned_icp_verify_ransac",
+           ["--icp", "--verify", "--fallback", "ransac", "--threads", "1", "--set", "ransac_threshold=0.06"])
+
 
 #: the sample, its split and the BOP symmetric ids of YCB-Video (the sample carries no annotation)
 DATA, SPLIT, SYMMETRIC = "../shared/data/ycbv_sample", "train_real", "1,13,14,16,18,19,20,21"
 
 
-def run_all(runs: Path, data: str) -> None:
+def run_all(runs: Path, data: str, pose: str | None = None) -> None:
     """Run ``register`` (one process) and the three evaluations of every entry of :data:`RUNS` whose results
-    CSV is not in ``runs`` yet."""
+    CSV is not in ``runs`` yet; with ``pose`` (a pose run directory) also :data:`CASCADE`'s ``predict-pose``,
+    pinned to one core (``taskset -c 0``, Linux)."""
     exe = [sys.executable, "-m", "sixdpose"]
     runs.mkdir(parents=True, exist_ok=True)
-    for _, method, on, stem, profile in RUNS:
+    todo = [(stem, ["register", "--method", method, "--icp", "--profile", profile, "--min-px", "0", "--workers", "1",
+                    "--verify" if on else "--no-verify"]) for _, method, on, stem, profile in RUNS]
+    if pose:
+        todo.append((CASCADE[1], ["predict-pose", "--pose", pose, *CASCADE[2]]))
+    for stem, cmd in todo:
         csv_path = runs / f"{stem}.csv"
         if not csv_path.is_file():
-            subprocess.run([*exe, "register", "--data", data, "--split", SPLIT, "--method", method, "--icp",
-                            "--profile", profile, "--masks", "gt", "--min-px", "0", "--workers", "1", "--no-progress",
-                            "--verify" if on else "--no-verify", "--out", str(csv_path)], check=True)
+            pin = ["taskset", "-c", "0"] if cmd[0] == "predict-pose" else []
+            subprocess.run([*pin, *exe, cmd[0], "--data", data, "--split", SPLIT, "--masks", "gt", "--no-progress",
+                            *cmd[1:], "--out", str(csv_path)], check=True)
         for part in ("all", "0", "1"):
             subprocess.run([*exe, "evaluate", "--data", data, "--split", SPLIT, "--symmetric-ids", SYMMETRIC,
                             "--min-px", "0", "--no-bop", "--no-progress", "--results", str(csv_path),
@@ -72,6 +90,7 @@ def main() -> None:
     ap.add_argument("--run", action="store_true", help="first run register and evaluate (missing CSVs only)")
     ap.add_argument("--data", default=DATA, help="the BOP YCB-Video sample")
     ap.add_argument("--runs", default="runs/verify")
+    ap.add_argument("--pose", default=None, help="a dense pose run: also the cascade row (learned, RANSAC fallback)")
     ap.add_argument("--results-dir", default="results")
     ap.add_argument("--figure", default=None, help="also draw accuracy against speed into this PNG")
     ap.add_argument("--figure-only", action="store_true", help="only draw --figure from the existing artifact")
@@ -85,9 +104,17 @@ def main() -> None:
         return
     runs = Path(a.runs)
     if a.run:
-        run_all(runs, a.data)
+        run_all(runs, a.data, a.pose)
     rows, per_obj, inputs = [], {}, []
-    for label, _, on, stem, _ in RUNS:
+    entries = [(label, on, stem) for label, _, on, stem, _ in RUNS]
+    cascade = runs / f"{CASCADE[1]}.csv"
+    if cascade.is_file():  # the pose run is named in the CSV's config
+        from sixdpose.artifacts.poses import read_results_config
+
+        run_path = Path(str((read_results_config(cascade) or {}).get("pose_run") or "?"))
+        run = (run_path.parent if run_path.suffix == ".pt" else run_path).name
+        entries.append((f"{CASCADE[0]} ({run})", True, CASCADE[1]))
+    for label, on, stem in entries:
         row = {"method": label, "verify": "on" if on else "off"}
         for part, col in (("0", "scene 000000"), ("1", "scene 000001"), ("all", "both scenes")):
             ev = runs / f"{stem}_eval_{part}"

@@ -254,3 +254,21 @@ def test_grey_detail_tells_a_flip_of_black_print_on_white_apart(monkeypatch):
     # where the model has no colours there is no detail either: geometry alone, as before
     bare = H.score_hypotheses(np.stack([X_true, flip]), surface(coloured=False), frame, cfg)
     assert not bare.textured and (bare.texture == 0).all()
+
+
+def test_neighbourhood_means_equal_the_per_point_means():
+    """sixdpose.geometry.neighbourhood_means (the colour search's and the surface's smoothing) equals the
+    per-point mean over cKDTree neighbourhoods, for vectors and scalars; an empty neighbourhood is refused."""
+    from scipy.spatial import cKDTree
+
+    from sixdpose.geometry import neighbourhood_means
+
+    rng = np.random.default_rng(3)
+    P, ch, g = rng.random((800, 3)), rng.random((800, 3)), rng.random(800)
+    nb = cKDTree(P).query_ball_point(P[:200], 0.15)
+    np.testing.assert_allclose(neighbourhood_means(ch, nb), np.array([ch[i].mean(axis=0) for i in nb]), atol=1e-12)
+    nb = cKDTree(P).query_ball_point(P, 0.05)
+    np.testing.assert_allclose(neighbourhood_means(g, nb), np.array([g[i].mean() for i in nb]), atol=1e-12)
+    assert neighbourhood_means(g, []).shape == (0,)
+    with pytest.raises(ValueError, match="empty neighbourhood"):
+        neighbourhood_means(g, [[0, 1], []])

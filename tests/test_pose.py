@@ -581,3 +581,35 @@ def test_learned_method_in_compare_methods(smoke_run, pose_ds):
     po = per_object_table(runs)
     assert list(po.columns) == ["obj_id", "name", "n_gt", "learned"] and po.loc[0, "n_gt"] == 2
     assert po.loc[0, "learned"] == table.loc[0, "add_s"]  # one object: its accuracy is the overall one
+
+
+def test_fallback_registers_the_poorly_verified_instances(pose_ds, tmp_path):
+    """predict-pose --verify --fallback ransac: an instance whose verified learned pose scores below
+    verify_retry_below is registered by RANSAC too and the better-verified pose is kept; at threshold 0 none
+    is; without --verify the option is refused."""
+    from sixdpose.datasets import as_reader
+    from sixdpose.evaluation.evaluate import evaluate
+    from sixdpose.pose.infer import Estimator
+
+    run = fake_pose_run(tmp_path / "p", profile_config("smoke"))  # random weights: its poses are wrong
+    reader = as_reader(pose_ds)
+    s = reader.load((0, 0))
+
+    def predict(**kw):
+        est = Estimator(run, device="cpu", icp=True, verify=True, reader=reader, **kw)
+        return est.predict(s), est
+
+    alone, _ = predict()
+    always, est = predict(fallback="ransac", overrides={"verify_retry_below": 1.0})  # every score is below 1
+    assert est.fallback_tried == len(s.instances) and est.fallback_won >= 1
+    assert all(b.score >= a.score for a, b in zip(alone, always, strict=True))
+    assert evaluate(reader, always, min_px=0).n_correct > evaluate(reader, alone, min_px=0).n_correct
+    assert est.settings()["fallback"]["instances_tried"] == len(s.instances)
+    never, est0 = predict(fallback="ransac", overrides={"verify_retry_below": 0.0})
+    assert est0.fallback_tried == 0 and [r.score for r in never] == [r.score for r in alone]
+    from sixdpose.pose.data import PoseError
+
+    with pytest.raises(PoseError, match="needs --verify"):
+        Estimator(run, device="cpu", icp=True, reader=reader, fallback="ransac")
+    assert main(["predict-pose", "--data", str(pose_ds), "--pose", str(run), "--masks", "gt", "--fallback", "ransac",
+                 "--out", str(tmp_path / "x.csv"), "--no-progress"]) == 2

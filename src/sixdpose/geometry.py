@@ -1,4 +1,4 @@
-"""Rigid transforms shared by every layer (base layer: numpy only).
+"""Rigid transforms and small array helpers shared by every layer (base layer: numpy only).
 
 A pose is named by its frames: ``X_AB`` (4, 4) is frame B expressed in frame A, ``p_A = X_AB @ p_B`` in
 homogeneous coordinates, with rotation ``R`` (3, 3) and translation ``t`` (3,) in metres; ``X_CO`` is an
@@ -22,3 +22,29 @@ def X_from(R, t) -> np.ndarray:
     X[:3, :3] = R
     X[:3, 3] = np.reshape(t, 3)
     return X
+
+
+def neighbourhood_means(values: np.ndarray, neighbours) -> np.ndarray:
+    """The mean of ``values`` over each neighbourhood: ``out[i] = values[neighbours[i]].mean(axis=0)``.
+
+    Args:
+        values: (N, ...) array. neighbours: a sequence of index lists, each non-empty (as
+            ``cKDTree.query_ball_point`` returns for query points that are among the tree's points).
+    Returns:
+        (len(neighbours), ...) float64 array; one pass over all neighbours (``np.add.reduceat``) instead
+        of one ``mean`` per point.
+    Raises:
+        ValueError: an empty neighbourhood.
+    """
+    import itertools
+
+    lens = np.fromiter(map(len, neighbours), dtype=np.int64, count=len(neighbours))
+    if len(lens) == 0:
+        return np.zeros((0, *np.shape(values)[1:]))
+    if lens.min() < 1:
+        raise ValueError("neighbourhood_means: an empty neighbourhood")
+    flat = np.fromiter(itertools.chain.from_iterable(neighbours), dtype=np.int64, count=int(lens.sum()))
+    starts = np.zeros(len(lens), dtype=np.int64)
+    np.cumsum(lens[:-1], out=starts[1:])
+    sums = np.add.reduceat(np.asarray(values, dtype=np.float64)[flat], starts, axis=0)
+    return sums / lens.reshape(-1, *([1] * (sums.ndim - 1)))

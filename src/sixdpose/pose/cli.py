@@ -94,6 +94,8 @@ def _cmd_predict(args) -> int:
         score_thresh=args.score_thresh,
         progress=not args.no_progress,
         overrides=overrides,
+        fallback=args.fallback,
+        fallback_profile=args.fallback_profile,
     )
     write_results(rows, out)
     settings = dict(est.settings(), data=str(args.data), masks=args.masks, split=args.split, limit=args.limit)
@@ -101,9 +103,10 @@ def _cmd_predict(args) -> int:
     failed = sum(1 for r in rows if r.score == 0)
     times = {(r.scene_id, r.im_id): r.time for r in rows}
     fps = len(times) / sum(times.values()) if times and sum(times.values()) > 0 else float("nan")
-    print(
-        f"{len(rows)} estimate(s) on {len(times)} image(s) ({failed} without an estimate), {fps:.2f} FPS; wrote {out}"
-    )
+    fb = (f"; fallback {est.fallback} on {est.fallback_tried} instance(s), better on {est.fallback_won}"
+          if est.fallback else "")
+    print(f"{len(rows)} estimate(s) on {len(times)} image(s) ({failed} without an estimate), {fps:.2f} FPS{fb}; "
+          f"wrote {out}")
     return 0
 
 
@@ -209,6 +212,12 @@ def register(subparsers) -> None:
     p.add_argument("--colour-verify", dest="colour_verify", action="store_true",
                    help="then run the hybrid stage's colour verification")
     O.add(p, "--verify")
+    p.add_argument("--fallback", choices=("ransac", "fgr", "super4pcs"), default=None,
+                   help="with --verify: register the instances whose verified pose scores below verify_retry_below "
+                        "(0.6) with this hybrid method too, verified, and keep the better pose (a cascade: the "
+                        "network where it fits the frame, the slower search where it does not)")
+    p.add_argument("--fallback-profile", dest="fallback_profile", choices=("fast", "default"), default="fast",
+                   help="the fallback's registration preset (default: fast)")
     O.add(p, "--split")
     O.add(p, "--limit")
     O.add(p, "--out", help="results CSV to write")

@@ -144,6 +144,16 @@ class Estimator:
         max_batch: most instances per forward pass (crop mode).
         overrides: :data:`INFERENCE_FIELDS` of the pose run's config, and ``verify_*`` fields of the
             registration config (with ``verify``), to change (``predict-pose --set``).
+        fallback: ``None``, or a global method of the hybrid stage (``"ransac"``, ``"fgr"``,
+            ``"super4pcs"``) for the instances whose verified learned pose scores below the
+            registration config's ``verify_retry_below`` (the threshold below which ``register``
+            retries): that method then registers the instance as ``register --icp --verify`` would
+            (``fallback_profile``'s preset, the instance's seed from :func:`~sixdpose.registration.instance_seed`)
+            and the better-verified pose is kept. Needs ``verify``. A cascade: the network's pose, checked
+            against the frame, where it fits; the slower search only where it does not.
+        fallback_profile: the registration preset of the fallback (``"fast"``, the default: RANSAC capped
+            at 20,000 iterations, made for verification; ``"default"``; ``"paper"`` is refused, as it
+            does not verify).
     Raises:
         CheckpointError: corrupt/incompatible checkpoints, or a refiner of another pose run.
         ConfigError: a bad override.
@@ -152,7 +162,8 @@ class Estimator:
     def __init__(self, pose, refiner=None, *, iterations: int | None = None, device: str | None = None,
                  icp: bool = False, colour_verify: bool = False, reader=None,
                  score_thresh: float = MIN_DETECTION_SCORE, seed: int = 0, max_batch: int = 64,
-                 overrides: dict | None = None, verify: bool = False):
+                 overrides: dict | None = None, verify: bool = False, fallback: str | None = None,
+                 fallback_profile: str = "fast"):
         from ..runs import pick_device
 
         dev = pick_device(device)  # auto / None: the GPU when present
@@ -166,6 +177,7 @@ class Estimator:
             ref_net, ref_cfg = load_refiner(refiner_ckpt, pose_ckpt, dev)
         self._setup(net, cfg, ck.classes_of(pose_ckpt), ref_net, ref_cfg, dev, iterations, icp, colour_verify, reader,
                     score_thresh, seed, max_batch, verify=verify, reg_overrides=reg_overrides)
+        self._setup_fallback(fallback, fallback_profile, reg_overrides)
         self.pose_ckpt, self.refiner_ckpt = pose_ckpt, refiner_ckpt
 
     @classmethod
@@ -183,6 +195,7 @@ class Estimator:
         est._setup(posenet, cfg, classes, refiner, refiner_cfg, torch.device(device), iterations, False, False, reader,
                    score_thresh, seed, max_batch)
         est.pose_ckpt, est.refiner_ckpt = None, None
+        est._setup_fallback(None, "fast", None)
         return est
 
     def _setup(self, net, cfg, classes, refiner, refiner_cfg, device, iterations, icp, colour_verify, reader,
@@ -239,7 +252,32 @@ class Estimator:
             "verify": self.verify, "colour_flips": self.colour_flips,
             "verify_config": ({k: getattr(self.reg_cfg, k) for k in _verify_fields()} if self.verify else None),
             "score_thresh": self.score_thresh, "seed": self.seed, "device": str(self.device),
+            "fallback": ({"method": self.fallback, "profile": self.fallback_profile,
+                          "below": self.reg_cfg.verify_retry_below, "instances_tried": self.fallback_tried,
+                          "instances_replaced": self.fallback_won} if self.fallback else None),
         }
+
+    def _setup_fallback(self, fallback: str | None, profile: str, reg_overrides: dict | None) -> None:
+        """The hybrid fallback of the constructor's ``fallback`` (see the class docstring); raises
+        :class:`~sixdpose.pose.data.PoseError` for an unknown method or profile or without ``verify``."""
+        from ..registration import METHODS, PRESETS, get_preset
+
+        self.fallback, self.fallback_profile, self.fallback_cfg = fallback, profile, None
+        self.fallback_tried = self.fallback_won = 0
+        if fallback is None:
+            return
+        if fallback not in METHODS:
+            raise PoseError(f"fallback: unknown method {fallback!r} (choose from {', '.join(METHODS)})")
+        if profile not in PRESETS or profile == "paper":
+            raise PoseError(f"fallback profile: expected one of {', '.join(p for p in PRESETS if p != 'paper')}, "
+                            f"got {profile!r}")
+        if not self.verify:
+            raise PoseError("--fallback needs --verify (the fallback runs where the verified score is low)")
+        self.fallback_cfg = get_preset(profile, verify=True, **(reg_overrides or {}))
+        if self.fallback_cfg.colour_verify:
+            from ..registration import warmup_colour
+
+            warmup_colour()
 
     def predict(self, sample, detections=None) -> list[PoseEstimate]:
         """Estimate the pose of every instance of one frame.
@@ -387,8 +425,36 @@ class Estimator:
             self.verify and sample is not None and mask is not None) else None
         r = refine_pose(X_from(R, t), inst.points, inst.obj_id, self._cache, self.reg_cfg, icp=self.icp,
                         colour_verify=self.colour_verify, colors=inst.colors, frame=frame)
-        score = max(float(r.score), MIN_VERIFIED_SCORE) if frame is not None else inst.score
-        return r.X_CO[:3, :3], r.X_CO[:3, 3], score
+        X_CO, verified = r.X_CO, float(r.score)
+        if self.fallback and frame is not None and verified < self.reg_cfg.verify_retry_below:
+            X_CO, verified = self._fall_back(inst, sample, frame, X_CO, verified)
+        score = max(verified, MIN_VERIFIED_SCORE) if frame is not None else inst.score
+        return X_CO[:3, :3], X_CO[:3, 3], score
+
+    def _fall_back(self, inst, sample, frame, X_CO: np.ndarray, verified: float) -> tuple[np.ndarray, float]:
+        """Register one instance whose verified learned pose ``X_CO`` (score ``verified``) fits the frame
+        poorly with the fallback method (:func:`sixdpose.registration.estimate_pose`, verified); returns
+        the better-verified ``(X_CO, score)``. An error of the fallback keeps the learned pose (logged)."""
+        import dataclasses
+
+        from ..registration import estimate_pose, instance_seed
+
+        base, method, cache = self.fallback_cfg, self.fallback, self._cache
+        assert base is not None and method is not None and cache is not None  # set by _setup_fallback, _setup
+        cfg = dataclasses.replace(base, seed=instance_seed(base.seed, sample.scene_id, sample.im_id, inst.obj_id,
+                                                           inst.index))
+        self.fallback_tried += 1
+        try:
+            r = estimate_pose(inst.points, inst.obj_id, method, cache, cfg, icp=self.icp,
+                              colors=inst.colors if cfg.colour_verify else None, frame=frame)
+        except Exception as e:  # one instance's numerical failure must not stop the run
+            log.warning("scene %d image %d obj %d: fallback %s failed (%s); the learned pose is kept",
+                        sample.scene_id, sample.im_id, inst.obj_id, self.fallback, e)
+            return X_CO, verified
+        if np.isfinite(r.X_CO).all() and float(r.score) > verified:
+            self.fallback_won += 1
+            return r.X_CO, float(r.score)
+        return X_CO, verified
 
 
 def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: int | None = None,
@@ -396,7 +462,8 @@ def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: 
                     split: str = "test",
                     limit: int = 0, score_thresh: float = MIN_DETECTION_SCORE, progress: bool = False,
                     estimator: Estimator | None = None, indices=None,
-                    overrides: dict | None = None) -> tuple[list[PoseEstimate], Estimator]:
+                    overrides: dict | None = None, fallback: str | None = None,
+                    fallback_profile: str = "fast") -> tuple[list[PoseEstimate], Estimator]:
     """Estimate poses on every image of a dataset (disk reads are not timed).
 
     Args:
@@ -404,7 +471,7 @@ def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: 
             score_thresh: see :class:`Estimator`. masks: ``"gt"`` or a prediction directory of
             ``sixdpose segment``. split: BOP split. limit: first N images only (0: all).
             indices: positions in ``reader.keys()`` of the images to predict (None: ``limit`` decides).
-            overrides: see :class:`Estimator`.
+            overrides, fallback, fallback_profile: see :class:`Estimator`.
     Returns:
         ``(estimates, estimator)``.
     Raises:
@@ -416,7 +483,8 @@ def predict_dataset(data, pose, *, refiner=None, masks: str = "gt", iterations: 
     reader = as_reader(data, split=split)
     est = estimator or Estimator(pose, refiner, iterations=iterations, device=device, icp=icp,
                                  colour_verify=colour_verify, reader=reader, score_thresh=score_thresh,
-                                 overrides=overrides, verify=verify)
+                                 overrides=overrides, verify=verify, fallback=fallback,
+                                 fallback_profile=fallback_profile)
     if masks != "gt" and not Path(masks).is_dir():
         raise PoseError(f"{masks}: prediction directory not found (use --masks gt for ground-truth masks)")
     if masks != "gt":

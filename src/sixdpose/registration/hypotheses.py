@@ -64,6 +64,17 @@ class Frame:
 
     def __post_init__(self):
         self._detail: dict = {}
+        self._cache: dict = {}
+
+    def arrays(self) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray, np.ndarray]:
+        """``((v, u), mask, depth)``: the mask's pixel rows and columns (``np.nonzero``), the mask as a
+        C-contiguous bool array and the depth as float32, computed once per frame (every scoring of the
+        instance's hypotheses reads them; the frame is not to be changed after it was made)."""
+        if not self._cache:
+            mask = np.ascontiguousarray(self.mask, dtype=np.bool_)
+            depth = self.depth if self.depth.dtype == np.float32 else self.depth.astype(np.float32)
+            self._cache["arrays"] = (np.nonzero(mask), mask, depth)
+        return self._cache["arrays"]
 
     def detail(self, radius_px: float) -> np.ndarray:
         """(H, W) float32 grey detail inside the mask: the grey value minus its mean over the mask's
@@ -136,6 +147,7 @@ def build_surface(points: np.ndarray, normals: np.ndarray, spacing: float, diame
     """A :class:`Surface` from (M, 3) samples and normals (object frame, m) at ``spacing`` metres; the
     colours (N, 3 in [0, 1]) of the model points ``model_points`` (N, 3) are read at the nearest one;
     the grey detail is taken over ``detail_rel`` x ``diameter``."""
+    from ..geometry import neighbourhood_means
     from .verify import chroma
 
     grey = ch = det = None
@@ -148,7 +160,7 @@ def build_surface(points: np.ndarray, normals: np.ndarray, spacing: float, diame
         grey, ch = grey_of(col), chroma(col)
         if radius > 0:
             nb = cKDTree(points).query_ball_point(points, radius)
-            det = grey - np.array([grey[ix].mean() for ix in nb])
+            det = grey - neighbourhood_means(grey, nb)
     c = points.mean(axis=0)
     _, vecs = np.linalg.eigh(np.cov((points - c).T))
     return Surface(np.asarray(points, np.float64), np.asarray(normals, np.float64), float(spacing), grey, ch,
@@ -471,7 +483,7 @@ def score_hypotheses(Xs: np.ndarray, surface: Surface, frame: Frame, cfg: Regist
     Xs = np.asarray(Xs, dtype=np.float64).reshape(-1, 4, 4)
     H = len(Xs)
     Hh, Ww = frame.mask.shape
-    mv, mu = np.nonzero(frame.mask)
+    (mv, mu), mask_c, depth = frame.arrays()
     if len(mu) == 0:
         raise ValueError("empty instance mask")
     K = np.asarray(frame.K, dtype=np.float64)
@@ -495,7 +507,6 @@ def score_hypotheses(Xs: np.ndarray, surface: Surface, frame: Frame, cfg: Regist
     pts, nrm = surface.cast("points"), surface.cast("normals")
     grey = surface.cast("grey") if textured else np.zeros(1, f4)
     chrom = surface.cast("chroma") if textured else np.zeros((1, 3), f4)
-    depth = frame.depth if frame.depth.dtype == f4 else frame.depth.astype(f4)
     dshare = cfg.verify_detail_share if (textured and surface.detail is not None) else 0.0
     if dshare > 0:
         gdet = surface.cast("detail")
@@ -504,7 +515,7 @@ def score_hypotheses(Xs: np.ndarray, surface: Surface, frame: Frame, cfg: Regist
         gdet, fdet = np.zeros(1, f4), np.zeros((1, 1), f4)
     out = np.zeros((H, 25))
     _score_kernel(pts, nrm, grey, chrom, gdet, textured, dshare > 0, Xs[:, :3, :3].astype(f4),
-                  Xs[:, :3, 3].astype(f4), fx, fy, cx, cy, depth, np.ascontiguousarray(frame.mask, dtype=np.bool_),
+                  Xs[:, :3, 3].astype(f4), fx, fy, cx, cy, depth, mask_c,
                   np.ascontiguousarray(rgb), fdet, cell, gw, gh, mcell, cfg.verify_tau_rel * surface.diameter,
                   np.empty(G), np.empty(G, np.bool_), np.empty(Np, np.int64), np.empty(Np, np.int64), np.empty(Np),
                   out)

@@ -32,7 +32,7 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry import X_from
+from ..geometry import X_from, neighbourhood_means
 
 if TYPE_CHECKING:
     from .presets import RegistrationConfig
@@ -345,7 +345,7 @@ def colour_search(
     # scene features: sharp and smoothed chromaticity, centred
     ch = chroma(colors)
     nb = cKDTree(P).query_ball_point(P[sel], smooth_rel * diameter)
-    fs_smooth = np.array([ch[i].mean(axis=0) for i in nb])
+    fs_smooth = neighbourhood_means(ch, nb)
     fs_sharp = ch[sel_f]
     fs_smooth -= fs_smooth.mean(axis=0)
     fs_sharp -= fs_sharp.mean(axis=0)
