@@ -132,15 +132,10 @@ def main() -> None:
                       f"  {r['flip_right']}")
             table += [{"run": label, "data": dlabel, **r} for r in rows]
     if a.result:
-        import json
-        from pathlib import Path
+        from sixdpose.artifacts.results import earlier_rows, write_result
 
-        from sixdpose.artifacts.results import write_result
-
-        old = Path(a.results_dir, f"{a.result}.json")
-        if a.keep and old.is_file():
-            given = {r["run"] for r in table}
-            table = [r for r in json.loads(old.read_text())["rows"] if r.get("run") not in given] + table
+        if a.keep:
+            table = earlier_rows(a.result, table, results_dir=a.results_dir) + table
 
         print(write_result(a.result, table, results_dir=a.results_dir,
                            units={"network_mm": "mm", "constant_mm": "mm", "n": "instances"},

@@ -41,7 +41,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from sixdpose.artifacts.results import write_result
+from sixdpose.artifacts.results import earlier_rows, write_result
 
 #: the verification's wider settings, chosen on the synthetic val split (never on the sample): the model's
 #: near-symmetries as hypotheses, the grey-detail texture term and the hypotheses recentred on the cloud
@@ -124,10 +124,8 @@ def main() -> None:
             rows.append(row)
             inputs.append(str(out))
             print(row, flush=True)
-    old = Path(a.results_dir, "learned_ycbv_sample.json")
-    if a.keep and old.is_file():
-        given = {r["run"] for r in rows}
-        kept = [dict(r) for r in json.loads(old.read_text())["rows"] if r.get("run") not in given]
+    if a.keep:
+        kept = earlier_rows("learned_ycbv_sample", rows, results_dir=a.results_dir)
         for r in kept:
             r.setdefault("measured", "an earlier session (its run is not here)")
             r.setdefault("predict-pose --set", "-")

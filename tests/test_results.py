@@ -98,6 +98,22 @@ def test_table_only_result_and_default_command(tmp_path):
     assert r.provenance["command"]  # sys.argv of pytest, its program shortened
 
 
+def test_earlier_rows_are_the_runs_not_measured_again(tmp_path):
+    """A benchmark's --keep (sixdpose.artifacts.results.earlier_rows): the rows of the file already there
+    whose run is not among the new rows, as copies; none without a file; a corrupt file is refused."""
+    from sixdpose.artifacts.results import earlier_rows
+
+    assert earlier_rows("k", [{"run": "a"}], results_dir=tmp_path) == []
+    write_result("k", [{"run": "a", "x": 1}, {"run": "b", "x": 2}, {"run": "c", "x": 3}], results_dir=tmp_path)
+    kept = earlier_rows("k", [{"run": "b", "x": 9}], results_dir=tmp_path)
+    assert kept == [{"run": "a", "x": 1}, {"run": "c", "x": 3}]
+    kept[0]["x"] = 5  # a copy: the file's rows are not changed
+    assert read_result(tmp_path / "k.json").rows[0]["x"] == 1
+    (tmp_path / "k.json").write_text("{")
+    with pytest.raises(ResultError, match="k.json"):
+        earlier_rows("k", [], results_dir=tmp_path)
+
+
 def test_write_is_atomic(tmp_path, monkeypatch):
     import sixdpose.fileio as fileio
 

@@ -421,6 +421,18 @@ def read_result(name: str | Path, results_dir: str | Path = DEFAULT_DIR) -> Resu
                   notes=doc.get("notes"), path=path)
 
 
+def earlier_rows(name: str, new_rows: list[dict], key: str = "run",
+                 results_dir: str | Path = DEFAULT_DIR) -> list[dict]:
+    """The rows of result ``name`` already in ``results_dir`` whose ``key`` none of ``new_rows`` has: what a
+    benchmark's ``--keep`` carries over when it adds runs beside ones measured earlier (copies; ``[]``
+    without the file). Raises :class:`ResultError` for a corrupt file, as :func:`read_result`."""
+    path = result_path(name, results_dir)
+    if not path.is_file():
+        return []
+    given = {r.get(key) for r in new_rows}
+    return [dict(r) for r in read_result(path).rows if r.get(key) not in given]
+
+
 def list_results(results_dir: str | Path = DEFAULT_DIR) -> list[str]:
     """Names of the result files in ``results_dir`` (sorted; empty if it does not exist)."""
     d = Path(results_dir)
