@@ -9,11 +9,12 @@ Reads the evaluations of the results CSVs made by (for M in super4pcs, ransac, f
         1,13,14,16,18,19,20,21 --min-px 0 --no-bop --results <csv> --out runs/verify/<stem>_eval_<all|0|1>
 
 and, with ``--pose RUN`` (a dense pose run trained on generated data only), the cascade of the learned pose
-and the hybrid method (:data:`CASCADE`: the network's pose, ICP, verification; RANSAC of the ``fast`` preset,
-verified, for the instances whose verified score is below ``verify_retry_below``, 0.6), pinned to one core::
+and the hybrid method (:data:`CASCADES`: the network's pose, ICP, verification; RANSAC of the ``fast`` preset,
+or Super4PCS, verified, for the instances whose verified score is below ``verify_retry_below``, 0.6), pinned to
+one core::
 
     taskset -c 0 sixdpose predict-pose --pose RUN --data ../shared/data/ycbv_sample --split train_real \
-        --masks gt --icp --verify --fallback ransac --threads 1 --set ransac_threshold=0.06 --out <csv>
+        --masks gt --icp --verify --fallback ransac|super4pcs --threads 1 --set ransac_threshold=0.06 --out <csv>
 
 (the ``_0`` / ``_1`` evaluations on the CSV's rows of scene 000000 / 000001) and writes the result
 artifacts ``results/verify_ycbv_sample.json`` (one row per method and switch) and
@@ -50,10 +51,14 @@ RUNS = [
     ("FGR + ICP", "fgr", True, "final_fgr_icp_verify", "default"),
 ]
 
-#: the cascade row (``--pose``): (method label, results CSV stem, predict-pose switches); the pose run's
+#: the cascade rows (``--pose``): (method label, results CSV stem, predict-pose switches); the pose run's
 #: directory name is added to the label
-CASCADE = ("learned + ICP, RANSAC (fast) below 0.6", "cascade_learned_icp_verify_ransac",
-           ["--icp", "--verify", "--fallback", "ransac", "--threads", "1", "--set", "ransac_threshold=0.06"])
+CASCADES = [
+    ("learned + ICP, RANSAC (fast) below 0.6", "cascade_learned_icp_verify_ransac",
+     ["--icp", "--verify", "--fallback", "ransac", "--threads", "1", "--set", "ransac_threshold=0.06"]),
+    ("learned + ICP, Super4PCS below 0.6", "cascade_learned_icp_verify_super4pcs",
+     ["--icp", "--verify", "--fallback", "super4pcs", "--threads", "1", "--set", "ransac_threshold=0.06"]),
+]
 
 
 #: the sample, its split and the BOP symmetric ids of YCB-Video (the sample carries no annotation)
@@ -62,14 +67,14 @@ DATA, SPLIT, SYMMETRIC = "../shared/data/ycbv_sample", "train_real", "1,13,14,16
 
 def run_all(runs: Path, data: str, pose: str | None = None) -> None:
     """Run ``register`` (one process) and the three evaluations of every entry of :data:`RUNS` whose results
-    CSV is not in ``runs`` yet; with ``pose`` (a pose run directory) also :data:`CASCADE`'s ``predict-pose``,
+    CSV is not in ``runs`` yet; with ``pose`` (a pose run directory) also :data:`CASCADES`' ``predict-pose``,
     pinned to one core (``taskset -c 0``, Linux)."""
     exe = [sys.executable, "-m", "sixdpose"]
     runs.mkdir(parents=True, exist_ok=True)
     todo = [(stem, ["register", "--method", method, "--icp", "--profile", profile, "--min-px", "0", "--workers", "1",
                     "--verify" if on else "--no-verify"]) for _, method, on, stem, profile in RUNS]
     if pose:
-        todo.append((CASCADE[1], ["predict-pose", "--pose", pose, *CASCADE[2]]))
+        todo += [(stem, ["predict-pose", "--pose", pose, *switches]) for _, stem, switches in CASCADES]
     for stem, cmd in todo:
         csv_path = runs / f"{stem}.csv"
         if not csv_path.is_file():
@@ -107,13 +112,14 @@ def main() -> None:
         run_all(runs, a.data, a.pose)
     rows, per_obj, inputs = [], {}, []
     entries = [(label, on, stem) for label, _, on, stem, _ in RUNS]
-    cascade = runs / f"{CASCADE[1]}.csv"
-    if cascade.is_file():  # the pose run is named in the CSV's config
-        from sixdpose.artifacts.poses import read_results_config
+    for label, stem, _ in CASCADES:
+        cascade = runs / f"{stem}.csv"
+        if cascade.is_file():  # the pose run is named in the CSV's config
+            from sixdpose.artifacts.poses import read_results_config
 
-        run_path = Path(str((read_results_config(cascade) or {}).get("pose_run") or "?"))
-        run = (run_path.parent if run_path.suffix == ".pt" else run_path).name
-        entries.append((f"{CASCADE[0]} ({run})", True, CASCADE[1]))
+            run_path = Path(str((read_results_config(cascade) or {}).get("pose_run") or "?"))
+            run = (run_path.parent if run_path.suffix == ".pt" else run_path).name
+            entries.append((f"{label} ({run})", True, stem))
     for label, on, stem in entries:
         row = {"method": label, "verify": "on" if on else "off"}
         for part, col in (("0", "scene 000000"), ("1", "scene 000001"), ("all", "both scenes")):
