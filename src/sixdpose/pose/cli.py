@@ -12,6 +12,8 @@ from pathlib import Path
 from .. import options as O
 from ..config import add_set_option, parse_overrides
 from ..logs import setup_logging
+from ..registration import PRESETS
+from ..registry import HYBRID_ALGORITHMS
 from .config import PROFILES, REFINER_PROFILES, RefinerConfig
 
 
@@ -212,11 +214,12 @@ def register(subparsers) -> None:
     p.add_argument("--colour-verify", dest="colour_verify", action="store_true",
                    help="then run the hybrid stage's colour verification")
     O.add(p, "--verify")
-    p.add_argument("--fallback", choices=("ransac", "fgr", "super4pcs"), default=None,
+    p.add_argument("--fallback", choices=list(HYBRID_ALGORITHMS), default=None,
                    help="with --verify: register the instances whose verified pose scores below verify_retry_below "
                         "(0.6) with this hybrid method too, verified, and keep the better pose (a cascade: the "
                         "network where it fits the frame, the slower search where it does not)")
-    p.add_argument("--fallback-profile", dest="fallback_profile", choices=("fast", "default"), default="fast",
+    p.add_argument("--fallback-profile", dest="fallback_profile", choices=[n for n in PRESETS if n != "paper"],
+                   default="fast",
                    help="the fallback's registration preset (default: fast)")
     O.add(p, "--split")
     O.add(p, "--limit")

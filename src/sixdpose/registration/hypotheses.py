@@ -64,17 +64,17 @@ class Frame:
 
     def __post_init__(self):
         self._detail: dict = {}
-        self._cache: dict = {}
+        self._arrays: tuple | None = None
 
     def arrays(self) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray, np.ndarray]:
         """``((v, u), mask, depth)``: the mask's pixel rows and columns (``np.nonzero``), the mask as a
         C-contiguous bool array and the depth as float32, computed once per frame (every scoring of the
         instance's hypotheses reads them; the frame is not to be changed after it was made)."""
-        if not self._cache:
+        if self._arrays is None:
             mask = np.ascontiguousarray(self.mask, dtype=np.bool_)
             depth = self.depth if self.depth.dtype == np.float32 else self.depth.astype(np.float32)
-            self._cache["arrays"] = (np.nonzero(mask), mask, depth)
-        return self._cache["arrays"]
+            self._arrays = (np.nonzero(mask), mask, depth)
+        return self._arrays
 
     def detail(self, radius_px: float) -> np.ndarray:
         """(H, W) float32 grey detail inside the mask: the grey value minus its mean over the mask's
