@@ -605,6 +605,7 @@ def test_fallback_registers_the_poorly_verified_instances(pose_ds, tmp_path):
     assert all(b.score >= a.score for a, b in zip(alone, always, strict=True))
     assert evaluate(reader, always, min_px=0).n_correct > evaluate(reader, alone, min_px=0).n_correct
     assert est.settings()["fallback"]["instances_tried"] == len(s.instances)
+    assert est.settings()["fallback"]["seed"] == 0  # the preset's; each instance's is derived from it and its ids
     never, est0 = predict(fallback="ransac", overrides={"verify_retry_below": 0.0})
     assert est0.fallback_tried == 0 and [r.score for r in never] == [r.score for r in alone]
     from sixdpose.pose.data import PoseError

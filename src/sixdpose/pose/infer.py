@@ -253,7 +253,9 @@ class Estimator:
             "verify_config": ({k: getattr(self.reg_cfg, k) for k in _verify_fields()} if self.verify else None),
             "score_thresh": self.score_thresh, "seed": self.seed, "device": str(self.device),
             "fallback": ({"method": self.fallback, "profile": self.fallback_profile,
-                          "below": self.reg_cfg.verify_retry_below, "instances_tried": self.fallback_tried,
+                          "below": self.reg_cfg.verify_retry_below,
+                          "seed": self.fallback_cfg.seed if self.fallback_cfg else None,
+                          "instances_tried": self.fallback_tried,
                           "instances_replaced": self.fallback_won} if self.fallback else None),
         }
 
