@@ -583,6 +583,29 @@ def test_learned_method_in_compare_methods(smoke_run, pose_ds):
     assert po.loc[0, "learned"] == table.loc[0, "add_s"]  # one object: its accuracy is the overall one
 
 
+def test_onboarding_is_timed_apart_from_the_frames(pose_ds, tmp_path):
+    """predict-pose --icp --verify: the objects' first-use model-side data (ICP reference, verification
+    surface) is their onboarding, spent on the first frame that needs it, left out of that frame's time
+    and recorded by ``settings()``; the same frame again spends none."""
+    import time
+
+    from sixdpose.datasets import as_reader
+    from sixdpose.pose.infer import Estimator
+
+    run = fake_pose_run(tmp_path / "p", profile_config("smoke"))
+    reader = as_reader(pose_ds)
+    s = reader.load((0, 0))
+    est = Estimator(run, device="cpu", icp=True, verify=True, reader=reader)
+    t0 = time.perf_counter()
+    rows = est.predict(s)
+    wall = time.perf_counter() - t0
+    first = est.onboarding_s
+    assert first > 0 and rows[0].time <= wall - first + 1e-6
+    rows = est.predict(s)
+    assert est.onboarding_s == first and rows[0].time > 0
+    assert est.settings()["onboarding_s"] == round(first, 3)
+
+
 def test_fallback_registers_the_poorly_verified_instances(pose_ds, tmp_path):
     """predict-pose --verify --fallback ransac: an instance whose verified learned pose scores below
     verify_retry_below is registered by RANSAC too and the better-verified pose is kept; at threshold 0 none

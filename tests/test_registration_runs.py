@@ -238,3 +238,31 @@ def test_numeric_trouble_is_a_row_reason_not_stderr_noise(syn, tmp_path, capfd, 
     assert all(r.score > 0 and r.reason == "" for i in (0, 2) for r in by_image[i])
     assert "RuntimeWarning" not in err and "Warning:" not in err, err
     assert all(np.isfinite(r.R).all() and np.isfinite(r.t).all() for r in rows)
+
+
+# ------------------------------------------------------------------------------------------------
+# the objects' onboarding: timed apart from the images
+# ------------------------------------------------------------------------------------------------
+def test_onboarding_is_timed_apart_from_the_images(syn, tmp_path, capsys):
+    """An object's first-use model-side data (references, colour grid, verification surface) is its
+    onboarding: the first image that needs it spends it, the image's ``time`` leaves it out, a second image
+    of the same object spends none, and ``register`` records the total in ``<out>.config.yml``."""
+    from sixdpose.datasets.readers import open_dataset
+    from sixdpose.registration import runner
+    from sixdpose.registration.presets import get_preset
+
+    cfg = get_preset("fast", verify=True)
+    runner._init_worker(open_dataset(syn), "ransac", True, cfg, "gt", 0, 0.0)
+    t0 = time.perf_counter()
+    rows, fail, onboarded = runner.process_image(0)
+    wall = time.perf_counter() - t0
+    assert fail is None and len(rows) == 2 and onboarded > 0
+    assert rows[0].time <= wall - onboarded + 1e-6  # charged to the onboarding, not to the image
+    rows, fail, again = runner.process_image(1)
+    assert again == 0.0 and rows[0].time > 0
+    out = tmp_path / "r.csv"
+    assert main(["register", "--data", str(syn), "--method", "ransac", "--icp", "--profile", "fast", "--workers", "1",
+                 "--no-progress", "--out", str(out)]) == 0
+    saved = yaml.safe_load(out.with_name("r.config.yml").read_text())
+    assert saved["onboarding_s"] > 0 and saved["verify"] is True
+    assert "onboarding" in capsys.readouterr().out

@@ -107,7 +107,8 @@ def _cmd_predict(args) -> int:
     fps = len(times) / sum(times.values()) if times and sum(times.values()) > 0 else float("nan")
     fb = (f"; fallback {est.fallback} on {est.fallback_tried} instance(s), better on {est.fallback_won}"
           if est.fallback else "")
-    print(f"{len(rows)} estimate(s) on {len(times)} image(s) ({failed} without an estimate), {fps:.2f} FPS{fb}; "
+    onb = f" (objects' onboarding {est.onboarding_s:.1f} s apart)" if est.onboarding_s else ""
+    print(f"{len(rows)} estimate(s) on {len(times)} image(s) ({failed} without an estimate), {fps:.2f} FPS{onb}{fb}; "
           f"wrote {out}")
     return 0
 

@@ -43,10 +43,12 @@ def register(sub) -> None:
 def _run(args) -> int:
     from pathlib import Path
 
+    import yaml
+
     from ..artifacts.poses import RESULTS_HEADER, results_config_path, write_results
     from ..artifacts.tables import write_table
     from ..datasets.readers import open_dataset
-    from ..fileio import claim_output_file
+    from ..fileio import atomic_write_text, claim_output_file
     from .presets import get_preset, verify_by_default
     from .runner import run_registration
 
@@ -64,13 +66,18 @@ def _run(args) -> int:
     ds = open_dataset(args.data, split=args.split)
     indices = range(0, len(ds), args.stride) if args.stride > 1 else None
     failures: list = []
+    timing: dict = {}
     rows = run_registration(ds, args.method, icp=args.icp, masks=args.masks, cfg=cfg, workers=args.workers,
                             limit=args.limit or None, min_px=args.min_px, min_score=args.score_thresh,
-                            progress=not args.no_progress, indices=indices, failures=failures)
+                            progress=not args.no_progress, indices=indices, failures=failures, timing=timing)
     write_results(rows, out)
-    cfg.save(results_config_path(out))
+    # the config, and the objects' onboarding seconds that the CSV's per-image times leave out
+    atomic_write_text(results_config_path(out), yaml.safe_dump(
+        {**cfg.to_dict(), "onboarding_s": round(timing.get("onboarding_s", 0.0), 3)}, sort_keys=True))
     n_bad = sum(1 for r in rows if r.reason)
     msg = f"wrote {len(rows)} estimates ({n_bad} with score 0) to {out}"
+    if timing.get("onboarding_s"):
+        msg += f" (objects' onboarding {timing['onboarding_s']:.1f} s, not in the per-image times)"
     if failures:
         fpath = out.with_name(out.stem + "_skipped_images.csv")
         write_table(

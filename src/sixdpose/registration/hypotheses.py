@@ -177,11 +177,12 @@ def model_surface(cache: ReferenceCache, obj_id: int, cfg: RegistrationConfig) -
     if isinstance(hit, Surface):
         return hit, 0.0
     t0 = time.perf_counter()
-    model = cache.dataset.model(obj_id)
-    spacing = cfg.verify_voxel_rel * model.diameter
-    ref, _ = cache.get(obj_id, spacing, None)
-    surf = build_surface(ref.points, ref.normals, spacing, model.diameter, model.points, model.colors,
-                         cfg.verify_detail_rel)
+    with cache.onboarding():
+        model = cache.dataset.model(obj_id)
+        spacing = cfg.verify_voxel_rel * model.diameter
+        ref, _ = cache.get(obj_id, spacing, None)
+        surf = build_surface(ref.points, ref.normals, spacing, model.diameter, model.points, model.colors,
+                             cfg.verify_detail_rel)
     cache.extra[key] = surf
     return surf, time.perf_counter() - t0
 

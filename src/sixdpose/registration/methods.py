@@ -12,6 +12,8 @@ runs scene -> model (every scene point has a counterpart on the full model; poin
 model's exact normals) and the result is inverted. :func:`estimate_pose` runs the whole per-instance
 pipeline (cloud preparation, method, ICP) and charges every step's time (normals, features,
 downsampling, first-use model preparation) to the instance, except disk reads (paper section V-A).
+``register`` and ``predict-pose`` then leave the first-use model preparation (the object's onboarding,
+:class:`~sixdpose.registration.geometry.ReferenceCache`) out of the per-image time and record it apart.
 """
 
 from __future__ import annotations

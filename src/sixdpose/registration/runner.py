@@ -118,12 +118,15 @@ def _init_worker(ds: DatasetReader, method: str, icp: bool, cfg: RegistrationCon
         warmup_verify()
 
 
-def process_image(index: int) -> tuple[list[PoseEstimate], tuple | None]:
+def process_image(index: int) -> tuple[list[PoseEstimate], tuple | None, float]:
     """Register every instance of image ``index`` of the worker's dataset (see :func:`run_registration`).
 
     Returns:
-        ``(rows, failure)``: the image's rows, and ``None`` or ``(scene_id, im_id, reason)`` when the
-        image itself could not be used (unreadable image files or predictions); the run goes on.
+        ``(rows, failure, onboarding_s)``: the image's rows, ``None`` or ``(scene_id, im_id, reason)`` when
+        the image itself could not be used (unreadable image files or predictions; the run goes on), and the
+        seconds of object onboarding (first-use model-side data,
+        :class:`~sixdpose.registration.geometry.ReferenceCache`) this image triggered. The rows' ``time``
+        (the image's) leaves disk reads and that onboarding out.
     """
     from ..artifacts.predictions import PredictionError
     from .geometry import backproject
@@ -142,7 +145,7 @@ def process_image(index: int) -> tuple[list[PoseEstimate], tuple | None]:
     except (DatasetError, PredictionError) as e:
         key = ds.keys()[index]
         log.warning("scene %d image %d skipped: %s", key[0], key[1], e)
-        return [], (int(key[0]), int(key[1]), str(e))
+        return [], (int(key[0]), int(key[1]), str(e)), 0.0
     known = set(ds.object_ids)
     # models are read from disk outside the timed section; an unreadable model fails its instances only
     bad_model: dict[int, str] = {}
@@ -153,6 +156,7 @@ def process_image(index: int) -> tuple[list[PoseEstimate], tuple | None]:
             bad_model[oid] = f"model unreadable ({e})"
     rows: list[PoseEstimate] = []
     inst_time: list[float] = []
+    onboarded = cache.onboarding_s
     for k, (oid, det_score, mask) in enumerate(dets):
         t0 = time.perf_counter()
         reason = ""
@@ -222,10 +226,11 @@ def process_image(index: int) -> tuple[list[PoseEstimate], tuple | None]:
             )
         )
         inst_time.append(est.time + max(bp_time, 0.0))
-    total = sum(inst_time)
+    onboarded = cache.onboarding_s - onboarded
+    total = max(sum(inst_time) - onboarded, 0.0)
     for r in rows:
         r.time = total
-    return rows, None
+    return rows, None, onboarded
 
 
 # ------------------------------------------------------------------------------------------
@@ -278,6 +283,7 @@ def run_registration(
     progress: bool = True,
     indices=None,
     failures: list | None = None,
+    timing: dict | None = None,
 ) -> list[PoseEstimate]:
     """Register every instance of every image of ``data`` (a synthetic or BOP dataset).
 
@@ -295,6 +301,8 @@ def run_registration(
             below this. progress: tqdm bar. indices: explicit image indices.
         failures: if a list, receives ``(scene_id, im_id, reason)`` for every image that could not be
             read (corrupt RGB/depth/mask files or predictions); such images are logged and skipped.
+        timing: if a dict, receives ``onboarding_s``: the seconds all processes spent onboarding objects
+            (building their model-side data on first use), which the rows' per-image ``time`` leaves out.
     Returns:
         one :class:`~sixdpose.artifacts.poses.PoseEstimate` per instance (per prediction with
         predicted masks), in image order.
@@ -317,12 +325,14 @@ def run_registration(
     args = (ds, method, icp, cfg, str(masks), int(min_px), float(min_score))
     rows: list[PoseEstimate] = []
     bad_images: list[tuple] = []
+    onboarding = 0.0
     bar = tqdm(total=len(idx), desc=f"register {method}{'+icp' if icp else ''}", unit="img", disable=not progress)
     if workers <= 1 or len(idx) <= 1:
         _init_worker(*args)
         with _one_thread():
             for i in idx:
-                r, fail = process_image(i)
+                r, fail, onb = process_image(i)
+                onboarding += onb
                 rows.extend(r)
                 if fail:
                     bad_images.append(fail)
@@ -338,7 +348,8 @@ def run_registration(
         try:
             # leaving the block by an exception (also KeyboardInterrupt) terminates the workers
             with process_pool(workers, _init_pool_worker, args) as pool:
-                for r, fail in pool.imap(process_image, idx, chunksize=1):
+                for r, fail, onb in pool.imap(process_image, idx, chunksize=1):
+                    onboarding += onb
                     rows.extend(r)
                     if fail:
                         bad_images.append(fail)
@@ -357,4 +368,6 @@ def run_registration(
         log.warning("%d of %d images could not be read and were skipped", len(bad_images), len(idx))
     if failures is not None:
         failures.extend(bad_images)
+    if timing is not None:
+        timing["onboarding_s"] = onboarding
     return rows
