@@ -431,6 +431,10 @@ def test_speed_accuracy_chart_pairs_a_methods_rows_with_and_without_verification
     arrows = [t for t in ax.texts if getattr(t, "arrow_patch", None) is not None]
     assert len(arrows) == 1 and tuple(arrows[0].xy) == (1.5, 95.0)  # A: off -> on
     assert charts.plot_speed_accuracy(rows[3:]) is None and charts.plot_speed_accuracy([]) is None
+    # a row measured several times is drawn at its median speed
+    fig = charts.plot_speed_accuracy([{"method": "D", "verify": "on", "accuracy": 97.0, "inst_per_s": 8.0,
+                                       "inst_per_s_median": 7.0}])
+    assert tuple(fig.axes[0].collections[0].get_offsets()[0]) == (7.0, 97.0)
 
 
 def test_hybrid_methods_name_the_verification_rows():

@@ -198,7 +198,8 @@ def plot_speed_accuracy(rows: list[dict], title: str = "", speed_label: str = "i
 
     Args:
         rows: dicts with ``method`` (str), ``verify`` (``"on"`` / ``"off"``), ``accuracy`` (%) and
-            ``inst_per_s`` (instances per second per core); rows without both numbers are left out.
+            ``inst_per_s`` (instances per second per core; ``inst_per_s_median``, the median over repeated
+            runs, instead where a row has it); rows without both numbers are left out.
     Returns:
         a matplotlib Figure, or None when no row has both numbers.
     """
@@ -206,12 +207,13 @@ def plot_speed_accuracy(rows: list[dict], title: str = "", speed_label: str = "i
 
     pts: list[tuple[str, str, float, float]] = []
     for r in rows:
-        x, y = _num(r.get("inst_per_s")), _num(r.get("accuracy"))
+        x = _num(r.get("inst_per_s_median"))
+        x, y = (_num(r.get("inst_per_s")) if x is None else x), _num(r.get("accuracy"))
         if x is not None and y is not None:
             pts.append((str(r["method"]), str(r.get("verify", "")), x, y))
     if not pts:
         return None
-    fig, ax = plt.subplots(figsize=(6.0, 4.0))
+    fig, ax = plt.subplots(figsize=(6.0, 4.0 + 0.13 * len(pts)))
     colours: dict[str, str] = {}
     for method, on, x, y in pts:
         c = colours.setdefault(method, f"C{len(colours)}")
@@ -234,7 +236,8 @@ def plot_speed_accuracy(rows: list[dict], title: str = "", speed_label: str = "i
     ax.tick_params(labelsize=7)
     ax.grid(alpha=0.3)
     ax.set_title(title or "Hypothesis verification: accuracy against speed", fontsize=9)
-    ax.legend(fontsize=6, loc="lower left")
+    # below the axes, so that it hides no point
+    ax.legend(fontsize=6, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=1, frameon=False)
     fig.tight_layout()
     return fig
 
