@@ -15,7 +15,9 @@ symmetric flags of ``objects.csv``), then the overall rows, with instances per s
 workers on the 2-core CPU, so per core: the sum of the per-image times; the objects' onboarding apart,
 ``onboarding_s``).
 
-    python benchmarks/verify_test.py [--run] [--data data/test] [--runs runs/verify_test]
+    python benchmarks/verify_test.py [--run] [--data data/test] [--runs runs/verify_test] [--name NAME]
+
+(``--data data/val --runs runs/verify_val --name verify_val_gt_nsd``: the same on the tuning split.)
 """
 
 from __future__ import annotations
@@ -64,6 +66,8 @@ def main() -> None:
     ap.add_argument("--data", default="data/test")
     ap.add_argument("--runs", default="runs/verify_test")
     ap.add_argument("--results-dir", default="results")
+    ap.add_argument("--name", default="verify_test_gt_nsd", help="the result artifact's name (another split's)")
+    ap.add_argument("--note", default="", help="added to the artifact's notes (how the runs were made)")
     a = ap.parse_args()
     runs = Path(a.runs)
     if a.run:
@@ -88,9 +92,9 @@ def main() -> None:
             onb[label] = f"{float((read_results_config(runs / f'{stem}.csv') or {}).get('onboarding_s') or 0):.1f}"
         inputs.append(str(runs / f"{stem}.csv"))
     order = sorted((k for k in rows if k.isdigit()), key=int) + ["all", "speed", "onboarding"]
-    write_result("verify_test_gt_nsd", [rows[k] for k in order if k in rows], results_dir=a.results_dir,
+    write_result(a.name, [rows[k] for k in order if k in rows], results_dir=a.results_dir,
                  inputs=inputs, notes="register --workers 2 on the 2-core CPU; merge-results' time is the sum of "
-                                      "both sources'",
+                                      "both sources'" + (f"; {a.note}" if a.note else ""),
                  description=f"register --icp --verify (near-symmetries, grey detail) on {a.data}, GT masks, GT "
                              "instances with >= 400 visible px: correct/GT per object, and the fusion of the two")
 

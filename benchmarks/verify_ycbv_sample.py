@@ -30,9 +30,12 @@ on an otherwise idle machine the speed column is one core's. ``inst_per_s`` coun
 which leave out disk reads and the objects' onboarding (their model-side data built on first use, about a
 second per object and preset, once per process: BOP 2023 times onboarding apart); ``onboarding_s`` is that
 total (from the CSV's ``.config.yml``) and ``inst_per_s_with_onboarding`` charges it to these 140 instances.
-``--repeat N`` runs each cascade N more times (same estimates) and adds the spread of both speeds over the
-runs (``*_median``, ``*_runs``: min-max); on a shared virtual machine one run's speed varies by tens of percent,
-so the figure plots the median where there is one.
+``--keep`` keeps the rows (and per-object columns) of the artifacts already there whose runs are not in
+``--runs`` this time (the cascades of a pose run that is not on this machine), each row saying when it was
+measured (``measured``: the date, commit and CPU of the run that measured it) so rows of different code or
+machines are not mistaken for one run. ``--repeat N`` runs each cascade N more times (same estimates) and
+adds the spread of both speeds over the runs (``*_median``, ``*_runs``: min-max); on a shared virtual
+machine one run's speed varies by tens of percent, so the figure plots the median where there is one.
 """
 
 from __future__ import annotations
@@ -115,6 +118,8 @@ def main() -> None:
     ap.add_argument("--results-dir", default="results")
     ap.add_argument("--figure", default=None, help="also draw accuracy against speed into this PNG")
     ap.add_argument("--figure-only", action="store_true", help="only draw --figure from the existing artifact")
+    ap.add_argument("--keep", action="store_true",
+                    help="keep the earlier artifact's rows whose runs are not here (marked when measured)")
     ap.add_argument("--note", default="one register process (--workers 1) on the 2-core CPU",
                     help="how the runs were made (the artifact's notes)")
     a = ap.parse_args()
@@ -126,6 +131,7 @@ def main() -> None:
     runs = Path(a.runs)
     if a.run:
         run_all(runs, a.data, a.pose, a.repeat)
+    old_rows, old_per_obj, old_when = _earlier(Path(a.results_dir)) if a.keep else ([], [], "")
     rows, per_obj, inputs = [], {}, []
     entries = [(label, on, stem) for label, _, on, stem, _ in RUNS]
     for label, stem, _ in CASCADES:
@@ -147,7 +153,7 @@ def main() -> None:
                 onb = (read_results_config(runs / f"{stem}.csv") or {}).get("onboarding_s")
                 if onb is not None:
                     row["onboarding_s"] = round(float(onb), 1)
-                    row["inst_per_s_with_onboarding"] = round(s["n_estimates"] / (s["total_time"] + float(onb)), 2)
+                    row["inst_per_s_with_onboarding"] = round(_speed(runs / f"{stem}.csv")[1], 2)
             else:
                 with open(ev / "add_s_per_object.csv") as fh:
                     for r in csv.DictReader(fh):
@@ -164,8 +170,22 @@ def main() -> None:
             row["inst_per_s_runs"] = _spread(per_image)
             row["inst_per_s_with_onboarding_median"] = round(float(np.median(charged)), 2)
             row["inst_per_s_with_onboarding_runs"] = _spread(charged)
+        if a.keep:
+            row["measured"] = "this artifact (its provenance)"
         rows.append(row)
         inputs.append(str(runs / f"{stem}.csv"))
+    if a.keep:
+        here = {(r["method"], r["verify"]) for r in rows}
+        kept = [r for r in old_rows if (r["method"], r["verify"]) not in here]
+        for r in kept:
+            r.setdefault("measured", old_when)
+            r["measured"] = r["measured"] if r["measured"] != "this artifact (its provenance)" else old_when
+        rows += kept
+        cols = {f"{r['method']} {r['verify']}" for r in kept}
+        for r in old_per_obj:
+            key = (int(r["scene"]), int(r["obj_id"]))
+            d = per_obj.setdefault(key, {k: r[k] for k in ("scene", "obj_id", "object")})
+            d.update({k: v for k, v in r.items() if k in cols})
     write_result("verify_ycbv_sample", rows, units={"inst_per_s": "instances/s", "accuracy": "%", "onboarding_s": "s",
                                                     "inst_per_s_with_onboarding": "instances/s",
                                                     "inst_per_s_median": "instances/s",
@@ -178,6 +198,22 @@ def main() -> None:
                  description="register --icp [--verify] on ycbv_sample train_real: correct/GT per scene and object")
     if a.figure:
         draw(Path(a.results_dir) / "verify_ycbv_sample.json", a.figure)
+
+
+def _earlier(results_dir: Path) -> tuple[list, list, str]:
+    """The rows of the two artifacts already in ``results_dir`` and when they were measured (the date, commit
+    and CPU of their provenance: speeds of two machines are not to be compared); empty when there are none."""
+    from sixdpose.artifacts.results import read_result
+
+    try:
+        main, per = read_result(results_dir / "verify_ycbv_sample.json"), \
+            read_result(results_dir / "verify_ycbv_sample_per_object.json")
+    except (OSError, ValueError):
+        return [], [], ""
+    prov = main.provenance or {}
+    cpu = (prov.get("hardware") or {}).get("cpu", "?")
+    when = f"{str(prov.get('date', '?'))[:10]} ({str(prov.get('commit', '?'))[:7]}, {cpu})"
+    return [dict(r) for r in main.rows], [dict(r) for r in per.rows], when
 
 
 def _speed(csv_path: Path) -> tuple[float, float]:
@@ -200,7 +236,10 @@ def draw(result: Path, png: str) -> None:
     from sixdpose.artifacts.results import read_result
     from sixdpose.reporting.charts import plot_speed_accuracy, save
 
-    fig = plot_speed_accuracy(read_result(result).rows,
+    here = "this artifact (its provenance)"
+    rows = [r if r.get("measured", here) == here else {**r, "method": f"{r['method']} [{r['measured']}]"}
+            for r in read_result(result).rows]  # rows kept from an earlier run say so in the legend
+    fig = plot_speed_accuracy(rows,
                               title="register --icp [--verify] on the YCB-Video sample (GT masks, 140 instances)")
     if fig is None:
         raise SystemExit(f"{result}: no row with both an accuracy and inst_per_s")

@@ -220,6 +220,37 @@ def test_near_symmetries_of_a_box_are_its_three_half_turns():
     assert H.near_symmetries(s) is H.near_symmetries(s)
 
 
+def test_near_symmetries_of_a_ball_are_the_half_turns_its_texture_keeps():
+    """A ball maps onto itself by every rotation; its print decides. A thin seam-like print that only the
+    half-turns about a tilted frame's three axes keep (a tetrahedral pattern: the sign of x y z in that
+    frame, drawn as narrow bands) must give exactly those three turns first, each within 3 degrees (refining
+    half-turns from a 20-degree lattice with the colours as extra ICP coordinates missed two of them by 35-45
+    degrees: the peaks of a narrow print are narrower than that lattice)."""
+    from scipy.spatial.transform import Rotation
+
+    n = 6000
+    i = np.arange(n) + 0.5
+    zz = 1 - 2 * i / n
+    rr = np.sqrt(1 - zz * zz)
+    phi = np.pi * (1 + np.sqrt(5)) * i
+    u = np.stack([rr * np.cos(phi), rr * np.sin(phi), zz], axis=1)  # unit sphere, evenly spread
+    R_F = Rotation.from_rotvec([0.4, -0.7, 0.3]).as_matrix()  # the pattern's frame, not the object's axes
+    f = u @ R_F  # coordinates in the pattern's frame
+    band = np.abs(np.abs(f[:, 0] * f[:, 1] * f[:, 2]) - 0.03) < 0.004  # narrow bands, as a ball's seams
+    colours = np.where(band[:, None], [0.8, 0.1, 0.1], [0.9, 0.9, 0.85])
+    colours[band & (f.prod(axis=1) > 0)] = (0.1, 0.1, 0.6)  # the sign of x y z decides the band's colour
+    radius = 0.037
+    surf = H.build_surface(radius * u, u, 0.002, 2 * radius, radius * u, colours)
+    sym = H.near_symmetries(surf, keep=6)
+    rv = Rotation.from_matrix(sym[:3, :3, :3]).as_rotvec()
+    assert np.allclose(np.linalg.norm(rv, axis=1), np.pi, atol=np.radians(3))
+    axes = rv / np.linalg.norm(rv, axis=1, keepdims=True)
+    # each of the first three is one of the pattern frame's axes (columns of R_F), all three present
+    match = np.abs(axes @ R_F)
+    assert (match.max(axis=1) > np.cos(np.radians(3))).all()
+    assert sorted(int(np.argmax(m)) for m in match) == [0, 1, 2]
+
+
 def test_verification_with_near_symmetries_undoes_a_flip_without_principal_turns():
     import dataclasses
 
@@ -272,3 +303,32 @@ def test_neighbourhood_means_equal_the_per_point_means():
     assert neighbourhood_means(g, []).shape == (0,)
     with pytest.raises(ValueError, match="empty neighbourhood"):
         neighbourhood_means(g, [[0, 1], []])
+
+
+def test_samples_are_read_at_the_pixel_whose_centre_is_nearest():
+    """Pixel (u, v) has its centre at integer coordinates (the readers' convention): a sample projecting to
+    u = 10.7 belongs to pixel 11. Stripes one pixel wide, seen head-on, correlate only when every sample
+    reads its nearest pixel (truncating the projection, as the kernel once did, shifts the reading by half
+    a pixel, so about half the samples read the neighbouring stripe: the true pose scored no better than a
+    shifted one on a baseball's seams)."""
+    z = 0.5
+    px = z / K[0, 0]  # one pixel at the plane (m)
+    a = np.arange(-40, 40) * px / 4 + px / 8  # four samples a pixel, none on a pixel border
+    A, B = np.meshgrid(a, a, indexing="ij")
+    p = np.stack([A.ravel(), B.ravel(), np.zeros(A.size)], axis=1)
+    n = np.tile([0.0, 0.0, -1.0], (len(p), 1))  # facing the camera
+    col_of = np.round(K[0, 0] * p[:, 0] / z + K[0, 2]).astype(int)  # the nearest pixel's column
+    red = (col_of % 2 == 0)[:, None]
+    colours = np.where(red, [0.8, 0.2, 0.2], [0.2, 0.8, 0.2])
+    surf = H.build_surface(p, n, px / 4, float(np.ptp(a) * np.sqrt(2)), p, colours, detail_rel=0.0)
+    depth = np.full(SHAPE, 2.0)
+    mask = np.zeros(SHAPE, bool)
+    cols = np.unique(col_of)
+    rows = np.unique(np.round(K[1, 1] * p[:, 1] / z + K[1, 2]).astype(int))
+    mask[rows.min():rows.max() + 1, cols.min():cols.max() + 1] = True
+    depth[mask] = z
+    rgb = np.zeros(SHAPE + (3,), np.uint8)
+    rgb[:, 0::2] = (204, 51, 51)
+    rgb[:, 1::2] = (51, 204, 51)
+    sc = H.score_hypotheses(X(t=(0, 0, z))[None], surf, H.Frame(depth, K, mask, rgb), CFG)
+    assert sc.texture[0] > 0.95

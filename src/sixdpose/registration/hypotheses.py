@@ -211,8 +211,50 @@ def _half_turn_axes(n: int) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 
+class _ColourGrid:
+    """A voxel grid over a model's samples ``P`` (M, 3) with colours ``C`` (M, 3): per cell the distance to
+    the nearest sample and that sample's colour, so that posing the samples and reading the grid replaces a
+    nearest-neighbour query (:func:`near_symmetries`' dense scans)."""
+
+    def __init__(self, P: np.ndarray, C: np.ndarray, tree, spacing: float, tol: float):
+        self.h = float(spacing)
+        self.lo = P.min(axis=0) - 2 * tol
+        self.shape = np.ceil((P.max(axis=0) + 2 * tol - self.lo) / self.h).astype(np.int64) + 1
+        idx = np.indices(tuple(self.shape)).reshape(3, -1).T
+        d, j = tree.query(self.lo + idx * self.h, distance_upper_bound=tol, workers=-1)
+        self.near = (d < tol).reshape(tuple(self.shape))
+        self.colour = np.asarray(C, dtype=np.float32)[np.minimum(j, len(P) - 1)].reshape(*self.shape, 3)
+
+    def fit_corr(self, Q: np.ndarray, CQ: np.ndarray, Rs: np.ndarray, c: np.ndarray,
+                 batch: int = 16) -> tuple[np.ndarray, np.ndarray]:
+        """For each rotation ``Rs[k]`` about ``c``, applied to the centred samples ``Q`` (N, 3) of colours
+        ``CQ``: the share of them that lands near the surface, and the correlation of their colours with
+        the colours they land on (0 where fewer than 10 land)."""
+        fits, corrs = np.empty(len(Rs)), np.empty(len(Rs))
+        A = np.asarray(CQ - CQ.mean(axis=0), np.float32)
+        AA = (A * A).sum(axis=1)
+        nx, ny, nz = (int(v) for v in self.shape)
+        Q32, off = np.asarray(Q, np.float32), (c - self.lo).astype(np.float32)
+        near, colour = self.near.ravel(), self.colour.reshape(-1, 3)
+        for b in range(0, len(Rs), batch):
+            R = np.asarray(Rs[b:b + batch], np.float32)
+            X = np.matmul(Q32, R.transpose(0, 2, 1)) + off
+            ijk = np.rint(X / self.h).astype(np.int64)
+            ok = ((ijk >= 0) & (ijk < self.shape)).all(axis=2)
+            lin = np.where(ok, (ijk[..., 0] * ny + ijk[..., 1]) * nz + ijk[..., 2], 0)
+            w = (ok & near[lin]).astype(np.float32)  # (B, N)
+            col = colour[lin]  # (B, N, 3)
+            n = w.sum(axis=1)
+            fits[b:b + batch] = n / len(Q)
+            wc = w[..., None] * col
+            r = _corr_from_sums(np.maximum(n, 1.0), w @ A, wc.sum(axis=1), w @ AA, (wc * col).sum(axis=(1, 2)),
+                                np.einsum("bnc,nc->b", wc, A))
+            corrs[b:b + batch] = np.where(n > 10, r, 0.0)
+        return fits, corrs
+
+
 def near_symmetries(surface: Surface, n_axes: int = 150, keep: int = 6, min_fit: float = 0.7,
-                    n_points: int = 300, iterations: int = 6, seed: int = 0) -> np.ndarray:
+                    n_points: int = 300, iterations: int = 6, seed: int = 0, n_dense: int = 3000) -> np.ndarray:
     """The model's near-symmetries: rigid motions ``X_ON`` (K, 4, 4) of the object frame, other than
     the identity, that map the model's surface onto itself, the flips that the masked cloud cannot
     tell apart from the true pose (a box's half-turns, a screwdriver about its shaft, a pitcher about
@@ -228,7 +270,7 @@ def near_symmetries(surface: Surface, n_axes: int = 150, keep: int = 6, min_fit:
     samples land on, so the turns the texture also keeps (a ball's seams) come first. Cached on
     ``surface`` (about 1 s per object). Not in the paper.
     """
-    key = ("near_symmetries", n_axes, keep, min_fit, n_points, iterations, seed)
+    key = ("near_symmetries", n_axes, keep, min_fit, n_points, iterations, seed, n_dense)
     hit = surface._near.get(key)
     if hit is not None:
         return hit
@@ -295,22 +337,40 @@ def near_symmetries(surface: Surface, n_axes: int = 150, keep: int = 6, min_fit:
     found.sort(key=lambda f: (-f[0], -f[1]))
     kept = distinct(found)
     if len(kept) > keep and C is not None and C_sub is not None:
-        # chromaticity scaled so that its spread weighs like 5 % of the diameter
-        w = 0.05 * surface.diameter / max(float(C.std(axis=0).mean()), 1e-3)
-        jtree = cKDTree(np.hstack([P, w * C]))
-        Cs = w * C_sub
-
-        def joint(Q: np.ndarray):
-            _, j = jtree.query(np.hstack([Q, Cs]))
-            return np.linalg.norm(Q - P[j], axis=1), j
-
-        again = []
-        for f in kept:
-            R, t = icp(f[2], f[3], joint, False)
-            fit, corr = fit_of(R, t)
-            if fit >= min_fit:
-                again.append((round(fit, 1), corr, R, t))
-        kept = distinct(sorted(again, key=lambda f: (-f[1], -f[0])))
+        # the shape maps onto itself in too many ways to keep them all (a ball, a can): scan half-turns about
+        # a dense lattice of axes by the colour agreement of the samples they move (the shape keeping them),
+        # then refine the best on a finer local lattice; a voxel grid of the surface's distance and colour
+        # makes each turn a gather (ICP from a 20-degree lattice with the colours as extra coordinates lost
+        # the narrow peaks of a ball's seam turns, a few degrees wide)
+        grid = _ColourGrid(P, C, tree, surface.spacing, tol)
+        sub2 = rng.choice(len(P), min(10 * n_points, len(P)), replace=False)
+        sub3 = rng.choice(len(P), min(20 * n_points, len(P)), replace=False)
+        axes = _half_turn_axes(n_dense)
+        Rs = Rotation.from_rotvec(math.pi * axes).as_matrix()
+        fits, corrs = grid.fit_corr(P[sub2] - c, C[sub2], Rs, c)
+        order = [i for i in np.argsort(-corrs) if fits[i] >= min_fit]
+        step = math.degrees(math.sqrt(2 * math.pi / n_dense))  # the lattice's spacing (degrees)
+        again: list = []
+        for i in order:
+            if len(again) >= keep:
+                break
+            R = Rs[i]
+            if rotation_error(R, np.eye(3)) < 20 or any(rotation_error(R, k[2]) < 20 for k in again):
+                continue
+            best = -1.0
+            for scale in (step, step / 3):  # two finer local lattices on more of the samples
+                g = np.radians(scale) * np.linspace(-1.0, 1.0, 5)
+                local = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+                trial = Rotation.from_rotvec(local).as_matrix() @ R
+                f2, c2 = grid.fit_corr(P[sub3] - c, C[sub3], trial, c)
+                c2 = np.where(f2 >= min_fit, c2, -np.inf)
+                j = int(np.argmax(c2))
+                if c2[j] > best:
+                    best, R = float(c2[j]), trial[j]
+            R2, t2 = icp(R, c - R @ c, tree.query, True)
+            if fit_of(R2, t2)[0] >= min_fit:
+                again.append((best, best, R2, t2))
+        kept = sorted(again, key=lambda f: -f[1])
     kept = kept[:keep]
     out = np.stack([X_from(f[2], f[3]) for f in kept]) if kept else np.zeros((0, 4, 4))
     surface._near[key] = out
@@ -359,8 +419,9 @@ def _score_kernel(pts, nrm, grey, chrom, gdet, textured, detailed, Rs, ts, fx, f
             nz = Rs[h, 2, 0] * nrm[k, 0] + Rs[h, 2, 1] * nrm[k, 1] + Rs[h, 2, 2] * nrm[k, 2]
             if nx * x + ny * y + nz * z >= 0:  # back-facing
                 continue
-            uf = fx * x / z + cx
-            vf = fy * y / z + cy
+            # pixel (u, v) has its centre at integer coordinates: the nearest pixel is the rounded one
+            uf = fx * x / z + cx + 0.5
+            vf = fy * y / z + cy + 0.5
             if uf < 0 or vf < 0 or uf >= Ww or vf >= Hh:
                 continue
             u = int(uf)
