@@ -52,6 +52,8 @@ import numpy as np
 from sixdpose.artifacts.poses import read_results_config
 from sixdpose.artifacts.results import write_result
 
+#: ``measured`` of the rows measured by the run that writes the artifact (``--keep``)
+HERE = "this artifact (its provenance)"
 #: (method label, register --method, verify, results CSV stem under --runs, register --profile)
 RUNS = [
     ("Super4PCS + ICP", "super4pcs", False, "base_s4pcs_icp", "default"),
@@ -171,15 +173,15 @@ def main() -> None:
             row["inst_per_s_with_onboarding_median"] = round(float(np.median(charged)), 2)
             row["inst_per_s_with_onboarding_runs"] = _spread(charged)
         if a.keep:
-            row["measured"] = "this artifact (its provenance)"
+            row["measured"] = HERE
         rows.append(row)
         inputs.append(str(runs / f"{stem}.csv"))
     if a.keep:
         here = {(r["method"], r["verify"]) for r in rows}
         kept = [r for r in old_rows if (r["method"], r["verify"]) not in here]
-        for r in kept:
-            r.setdefault("measured", old_when)
-            r["measured"] = r["measured"] if r["measured"] != "this artifact (its provenance)" else old_when
+        for r in kept:  # rows measured by the earlier artifact's own run take its provenance
+            if r.get("measured", HERE) == HERE:
+                r["measured"] = old_when
         rows += kept
         cols = {f"{r['method']} {r['verify']}" for r in kept}
         for r in old_per_obj:
@@ -236,8 +238,7 @@ def draw(result: Path, png: str) -> None:
     from sixdpose.artifacts.results import read_result
     from sixdpose.reporting.charts import plot_speed_accuracy, save
 
-    here = "this artifact (its provenance)"
-    rows = [r if r.get("measured", here) == here else {**r, "method": f"{r['method']} [{r['measured']}]"}
+    rows = [r if r.get("measured", HERE) == HERE else {**r, "method": f"{r['method']} [{r['measured']}]"}
             for r in read_result(result).rows]  # rows kept from an earlier run say so in the legend
     fig = plot_speed_accuracy(rows,
                               title="register --icp [--verify] on the YCB-Video sample (GT masks, 140 instances)")
