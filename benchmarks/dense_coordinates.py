@@ -82,7 +82,8 @@ def measure(pose: str, data: str, split: str, images: int, min_px: int, seed: in
                     same = len(found.R) == n_flips and np.allclose(found.R, stored.R, atol=1e-4)
                     flips[o.obj_id] = found if same else stored
                 fl = flips[o.obj_id]
-                d = canonical_flip(o.R, fl)
+                fr = out["frame"][j].double().numpy() if "frame" in out else None  # input_frame=pca
+                d = canonical_flip(o.R, fl, fr)
                 tg = coordinate_targets(inst.cloud, o.R, o.t, fl)[d:d + 1]
                 named = None
                 if est.colour_flips:  # the turn named by the model's colours, from the true canonical pose

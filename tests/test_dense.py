@@ -551,3 +551,87 @@ def test_geometry_only_run_names_the_turn_by_the_model_colours(tmp_path):
     assert not by_classifier.colour_flips
     assert not Estimator(tmp_path / "r", device="cpu").colour_flips  # no reader: no model colours (a warning)
     _predict_proper_poses(ds, tmp_path / "r", tmp_path / "res.csv", 2, (0.4, 0.7))
+
+
+def test_pca_input_frame_makes_the_dense_head_blind_to_turns_of_the_view(tmp_path):
+    """input_frame=pca: the network sees the centred cloud in its own principal axes, so turning the cloud about
+    the camera centre (the object turned in front of the camera) leaves the predicted object coordinates as they
+    were (they live in the object frame); in the camera frame they change. The frame is a proper rotation whose
+    least-spread axis faces the camera, the canonical flip is chosen in it, and a run trains and predicts."""
+    from sixdpose.pose.config import PoseConfig
+    from sixdpose.pose.dense import Symmetry, canonical_flip
+    from sixdpose.pose.model import PoseNet, pca_frame
+    from sixdpose.pose.train import train_pose
+
+    rng = np.random.default_rng(0)
+    p = rng.normal(size=(1, 200, 3)) * np.array([0.06, 0.03, 0.01])
+    p[..., 0] += rng.exponential(0.01, size=(1, 200))  # a third moment along the long axis: its sign is fixed
+    p += np.array([0.05, -0.02, 0.8])
+    Q = Rotation.from_rotvec([0.3, -0.2, 0.25]).as_matrix()
+    clouds = [torch.tensor(p, dtype=torch.float32), torch.tensor(p @ Q.T, dtype=torch.float32)]
+    cen = clouds[0].mean(dim=1)
+    V = pca_frame(clouds[0] - cen[:, None], cen)[0].double().numpy()
+    assert np.allclose(V.T @ V, np.eye(3), atol=1e-5) and np.linalg.det(V) > 0.999
+    assert V[:, 2] @ -cen[0].double().numpy() > 0 and abs(V[:, 0] @ [1.0, 0, 0]) > 0.95
+    coords = {}
+    for frame in ("camera", "pca"):
+        torch.manual_seed(0)
+        net = PoseNet(2, width=1 / 8, emb_dim=8, norm="group", head="dense", flips=2, appearance="local",
+                      input_frame=frame).eval()
+        with torch.no_grad():
+            outs = [net(None, None, torch.zeros(1, 200, dtype=torch.long), c, torch.tensor([0])) for c in clouds]
+        coords[frame] = (outs[1]["coords"] - outs[0]["coords"]).abs().max().item()
+        assert ("frame" in outs[0]) == (frame == "pca")
+    assert coords["pca"] < 1e-4 < 1e-3 < coords["camera"]
+    # the canonical turn is chosen in the frame the network sees: turning camera and frame together keeps it
+    half = Rotation.from_rotvec([0, 0, math.pi]).as_matrix()
+    flips = Symmetry.build([(np.eye(3), np.zeros(3)), (half, np.zeros(3))])
+    for R in Rotation.random(20, random_state=1).as_matrix():
+        assert canonical_flip(R, flips, V) == canonical_flip(Q @ R, flips, Q @ V)
+    assert canonical_flip(R, flips, np.eye(3)) == canonical_flip(R, flips)
+    with pytest.raises(ValueError, match="input_frame=.pca. needs head=dense"):
+        PoseConfig(input_frame="pca").validate()
+    with pytest.raises(ValueError, match="input_frame must be one of"):
+        PoseConfig(head="dense", input_frame="world").validate()
+    assert "input_frame" not in PoseConfig(head="dense").arch()  # earlier runs keep their arch
+    ds, _ = _box_dataset(tmp_path / "box", colours=True)
+    train_pose(ds, tmp_path / "r", profile="smoke", progress=False,
+               **dict(DENSE, flips=4, appearance="local", input_frame="pca"))
+    assert ck.load(tmp_path / "r" / ck.LAST)["arch"]["input_frame"] == "pca"
+    _predict_proper_poses(ds, tmp_path / "r", tmp_path / "res.csv", 2, (0.4, 0.7))
+
+
+def test_with_icp_the_colours_name_the_turn_after_icp(tmp_path):
+    """With ``--icp`` a run whose flips are named by the model's colours names the turn after ICP of the fitted
+    canonical pose: a fit a few centimetres off across the box makes the quadrant colours name another turn, ICP
+    brings the pose onto the cloud (the turns are symmetries of the shape, so one ICP serves them all) and the
+    colours then name the true one; ``predict`` runs that ICP once for each instance of a class with flips."""
+    from types import SimpleNamespace
+
+    from sixdpose.datasets.readers import open_dataset
+    from sixdpose.pose.dense import canonical_flip, shape_flips
+    from sixdpose.pose.infer import Estimator
+    from sixdpose.pose.train import train_pose
+
+    ds, P = _box_dataset(tmp_path / "box", colours=True)
+    train_pose(ds, tmp_path / "r", profile="smoke", progress=False, **dict(DENSE, flips=4, appearance="local"))
+    reader = open_dataset(ds)
+    est = Estimator(tmp_path / "r", reader=reader, device="cpu", icp=True)
+    fl = shape_flips(reader.model(2), 4)
+    cols = _quadrant_colours(P)
+    R, t = Rotation.from_rotvec([0.35, -0.3, 0.2]).as_matrix() @ fl.R[1], np.array([0.0, 0.01, 0.55])
+    p_C = P @ R.T + t
+    near = p_C[:, 2] < np.percentile(p_C[:, 2], 40)
+    inst = SimpleNamespace(obj_id=2, points=p_C[near], colors=cols[near])
+    d = canonical_flip(R, fl)
+    Rc, tc = R @ fl.R[d], R @ fl.t[d] + t
+    off = tc + Rc @ np.array([0.0, -0.03, 0.0])  # 3 cm across the box, half its width
+    assert est._colour_flip(inst, Rc, off, 0) != d
+    Ri, ti = est._icp(inst, Rc, off)
+    assert np.linalg.norm(ti - tc) < 0.005 and est._colour_flip(inst, Ri, ti, 0) == d
+    calls = []
+    icp = est._icp
+    est._icp = lambda *a: calls.append(1) or icp(*a)
+    s = reader.load(reader.keys()[0])
+    rows = est.predict(s)
+    assert len(calls) == len(rows) == 1

@@ -45,6 +45,8 @@ HEADS = ("paper", "dense")
 APPEARANCES = ("cnn", "local", "local_rgb", "none")
 #: how the dense head names a shape flip at inference (PoseConfig.flip_choice)
 FLIP_CHOICES = ("auto", "classifier", "colour")
+#: the frame the dense head sees the centred cloud in (PoseConfig.input_frame)
+INPUT_FRAMES = ("camera", "pca")
 DENSE_LOSSES = ("densefusion", "decoupled")
 
 
@@ -112,9 +114,15 @@ class PoseConfig(FrameSchedule):
             turn inference then names from the object model's colours (``flip_choice``).
         flip_choice: how inference names the shape flip (``flips`` > 0): ``classifier`` (the network's flip
             classifier), ``colour`` (each turn of the fitted pose scored by how well the model's colours
-            agree with the masked points', :func:`~sixdpose.registration.verify.colour_scores`; the
-            classifier where the model has no colours) or ``auto`` (``colour`` without the CNN,
+            agree with the masked points', :func:`~sixdpose.registration.verify.colour_scores`, after ICP
+            of the fitted pose when ``predict-pose --icp``; the classifier where the model has no colours)
+            or ``auto`` (``colour`` without the CNN,
             ``classifier`` with it).
+        input_frame: the frame in which the dense head sees the centred cloud: ``camera`` (as sampled) or
+            ``pca`` (turned into the cloud's own principal axes, :func:`~sixdpose.pose.model.pca_frame`, so
+            the input no longer changes when the object turns with respect to the camera and the
+            coordinates it must give back, which live in the object's frame, do not either; the canonical
+            shape flip is chosen in that frame too). The pose is still fitted to the camera-frame cloud.
 
     Data:
         num_points: masked pixels with valid depth sampled per instance (fewer: wrapped repeats).
@@ -161,6 +169,7 @@ class PoseConfig(FrameSchedule):
     flip_weight: float = bounded(0.1, min=0, max=100)
     appearance: str = "cnn"
     flip_choice: str = "auto"
+    input_frame: str = "camera"
     rgb_noise: float = bounded(0.3, min=0, max=1)
     colour_jitter: float = bounded(0.0, min=0, max=1, max_open=True)
     mask_jitter_px: int = bounded(0, min=0, max=64)
@@ -192,6 +201,10 @@ class PoseConfig(FrameSchedule):
             raise ValueError(f"appearance={self.appearance!r} needs head=dense, got head={self.head!r}")
         if self.flip_choice not in FLIP_CHOICES:
             raise ValueError(f"flip_choice must be one of {FLIP_CHOICES}, got {self.flip_choice!r}")
+        if self.input_frame not in INPUT_FRAMES:
+            raise ValueError(f"input_frame must be one of {INPUT_FRAMES}, got {self.input_frame!r}")
+        if self.input_frame != "camera" and self.head != "dense":
+            raise ValueError(f"input_frame={self.input_frame!r} needs head=dense, got head={self.head!r}")
         if self.flips and self.head != "dense":
             raise ValueError(f"flips needs head=dense, got head={self.head!r}")
         if not self.ransac_threshold > 0 or self.ransac_iterations < 1:
@@ -210,6 +223,8 @@ class PoseConfig(FrameSchedule):
             arch["flips"] = self.flips
         if self.appearance != "cnn":  # likewise the networks with a CNN
             arch["appearance"] = self.appearance
+        if self.input_frame != "camera":  # likewise the networks that see the camera frame
+            arch["input_frame"] = self.input_frame
         return arch
 
 

@@ -200,7 +200,7 @@ def shape_flips(model, max_flips: int) -> Symmetry:
 _AXIS_REF = np.array([0.3, -0.8, -0.5]) / np.linalg.norm([0.3, -0.8, -0.5])
 
 
-def canonical_flip(R: np.ndarray, flips: Symmetry) -> int:
+def canonical_flip(R: np.ndarray, flips: Symmetry, frame: np.ndarray | None = None) -> int:
     """Index of the canonical turn of a pose, the same for every equivalent pose of the shape (up to ties), so
     a function of what the image shows: the flip ``S_d`` whose pose ``X S_d`` has the rotation closest to the
     camera's axes (largest ``trace(R R_d)``); for a shape with a continuous axis ``a``, the one whose axis
@@ -208,10 +208,15 @@ def canonical_flip(R: np.ndarray, flips: Symmetry) -> int:
 
     Args:
         R: (3, 3) rotation of ``X_CO``. flips: the object's :func:`shape_flips`.
+        frame: (3, 3) the frame the network sees the cloud in (its columns in the camera frame:
+            :func:`~sixdpose.pose.model.pca_frame` with ``input_frame = "pca"``); its axes then take the
+            camera's place. None: the camera frame.
     Returns:
         d in ``range(len(flips.R))``.
     """
     R = np.asarray(R, float)
+    if frame is not None:
+        R = np.asarray(frame, float).T @ R
     if flips.axis is not None:
         return int(np.argmax((R @ flips.R @ flips.axis) @ _AXIS_REF))
     return int(np.argmax(np.einsum("ij,dji->d", R, flips.R)))

@@ -386,6 +386,11 @@ class Estimator:
             R, t, _ = ransac_kabsch(y, inst.cloud, c, threshold=self.cfg.ransac_threshold,
                                     iterations=self.cfg.ransac_iterations, rng=rng)
             ci = int(batch["obj_index"][k])
+            if self.colour_flips and self.icp and int(self.net.flip_n[ci]) > 1 and inst.points is not None:
+                # the colours name the turn at a pose that ICP has brought onto the cloud: the canonical fit is
+                # often a couple of centimetres off, enough for the print of the wrong turn to agree better,
+                # and the turns are symmetries of the shape, so one ICP serves them all
+                R, t = self._icp(inst, R, t)
             d = self._colour_flip(inst, R, t, ci) if self.colour_flips else None
             d = int(flip[k]) if d is None else d
             if d:  # the coordinates are the canonical turn's: back to the named turn
@@ -393,6 +398,17 @@ class Estimator:
             Rs.append(R)
             ts.append(t)
         return np.stack(Rs), np.stack(ts)
+
+    def _icp(self, inst, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The pose ``(R, t)`` of one instance after the hybrid stage's ICP alone (no colour check, no
+        verification: :func:`sixdpose.registration.refine_pose`)."""
+        from ..registration import refine_pose
+
+        if self._cache is None:  # no reader: no models to refine against
+            return R, t
+        r = refine_pose(X_from(R, t), inst.points, inst.obj_id, self._cache, self.reg_cfg, icp=True,
+                        colour_verify=False, colors=inst.colors, frame=None)
+        return r.X_CO[:3, :3], r.X_CO[:3, 3]
 
     def _turned(self, R: np.ndarray, t: np.ndarray, ci: int, d: int) -> tuple[np.ndarray, np.ndarray]:
         """The canonical pose ``(R, t)`` of class ``ci`` mapped back by its flip ``d`` (:func:`~.dense.unflip`)."""

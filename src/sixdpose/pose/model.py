@@ -23,6 +23,9 @@ Shapes (``w`` = width multiplier, ``c(x) = max(1, round(x * w))``; ``w = 1`` is 
   3->64->128, embedding emb->64->128, [64+64] and [128+128] concatenated (384) -> 512 -> 1024,
   averaged; heads 1024->512->128 -> per-class quaternion and translation.
 
+With ``input_frame = "pca"`` (dense head) the centred cloud is turned into its principal axes
+(:func:`pca_frame`) before the point and local-shape branches see it.
+
 ``norm`` = ``none`` uses no normalisation layer anywhere (the paper); ``group``/``batch`` put one after
 every convolution of the CNN and the point branches (an ablation).
 """
@@ -234,6 +237,32 @@ class LocalGeometry(nn.Module):
         return self.out(torch.cat([f1, f2], dim=1))
 
 
+def pca_frame(centred: torch.Tensor, centroid: torch.Tensor) -> torch.Tensor:
+    """The principal axes of each instance's centred cloud, as a right-handed frame with fixed signs.
+
+    Columns: ``v1`` the axis of largest spread (its sign: the cloud's third moment along it positive),
+    ``v3`` the axis of least spread (for a surface seen from one side, about its normal: its sign towards
+    the camera, ``v3 . -centroid >= 0``) and ``v2 = v3 x v1``. Turning the cloud and its centroid together
+    about the camera centre turns the frame with them, so ``centred @ V`` is unchanged (up to the signs'
+    ties: a spread equal along two axes, or a third moment near 0). No gradient flows through it.
+
+    Args:
+        centred: (N, P, 3) points minus their centroid (any length unit). centroid: (N, 3) camera frame.
+    Returns:
+        (N, 3, 3) float32 rotations whose columns are ``v1, v2, v3`` in the camera frame.
+    """
+    with torch.no_grad(), torch.autocast(centred.device.type, enabled=False):
+        x = centred.float()
+        cov = x.transpose(1, 2) @ x / max(x.shape[1], 1)
+        _, vec = torch.linalg.eigh(cov)  # ascending eigenvalues
+        v1, v3 = vec[..., 2], vec[..., 0]
+        s1 = torch.sign(((x @ v1[..., None]) ** 3).sum(dim=(1, 2)))
+        v1 = v1 * torch.where(s1 == 0, torch.ones_like(s1), s1)[:, None]
+        s3 = torch.sign(-(v3 * centroid.float()).sum(dim=1))
+        v3 = v3 * torch.where(s3 == 0, torch.ones_like(s3), s3)[:, None]
+        return torch.stack([v1, torch.linalg.cross(v3, v1), v3], dim=2)
+
+
 class PoseNet(nn.Module):
     """The main network (see the module docstring).
 
@@ -245,7 +274,8 @@ class PoseNet(nn.Module):
             ``rotation`` and ``translation`` are then unused). flips: room for each class's shape flips
             (dense head). appearance: ``cnn`` (per-pixel CNN embeddings), ``local`` (no CNN: the
             :class:`LocalGeometry` embedding), ``local_rgb`` (the same with each point's colour) or ``none``
-            (no CNN, a zero embedding: the points alone).
+            (no CNN, a zero embedding: the points alone). input_frame: ``camera`` or ``pca`` (dense head:
+            the centred cloud turned into its principal axes, :func:`pca_frame`).
     """
 
     flip_R: torch.Tensor
@@ -254,8 +284,9 @@ class PoseNet(nn.Module):
 
     def __init__(self, num_classes: int, width: float = 1.0, emb_dim: int = 32, norm: str = "none",
                  rotation: str = "quaternion", translation: str = "absolute", head: str = "paper", flips: int = 0,
-                 appearance: str = "cnn"):
+                 appearance: str = "cnn", input_frame: str = "camera"):
         super().__init__()
+        self.input_frame = input_frame if head == "dense" else "camera"
         self.num_classes, self.rotation, self.translation, self.head = num_classes, rotation, translation, head
         self.flips = flips if head == "dense" else 0
         self.emb_dim, self.appearance = emb_dim, appearance
@@ -347,18 +378,27 @@ class PoseNet(nn.Module):
             dict: ``R`` (N, 3, 3), ``t`` (N, 3) metres (``X_CO``), ``emb`` (N, E, P) colour embeddings,
             ``att_r``/``att_t`` (N, P) attention weights. The dense head instead: ``coords`` (N, P, 3)
             object coordinates of the points (metres), ``conf_logit`` (N, P) and ``emb``; with flips also
-            ``flip_logit`` (N, F), the logits of the class's flips, -inf past its count.
+            ``flip_logit`` (N, F), the logits of the class's flips, -inf past its count; with
+            ``input_frame = "pca"`` also ``frame`` (N, 3, 3), the :func:`pca_frame` the cloud was seen in.
         """
         centroid = cloud.mean(dim=1)
+        centred = (cloud - centroid[:, None, :]) / OFFSET_SCALE
+        frame = None
+        if self.input_frame == "pca":  # the cloud in its own principal axes (the object coordinates do not turn)
+            frame = pca_frame(centred, centroid)
+            centred = centred @ frame.to(centred.dtype)
         if self.local is not None:
             colours = None
             if self.local.colour:  # the sampled pixels' colours, gathered from the (normalised) crops
                 colours = standardise_colours(gather_points(images, img_index, choose))
-            emb = self.local((cloud - centroid[:, None, :]) / OFFSET_SCALE, colours)
+            emb = self.local(centred, colours)
         else:
             emb = self.embed(images, img_index, choose)
         if self.head == "dense":
-            return self._dense(cloud, centroid, emb, obj_index)
+            out = self._dense(centred, emb, obj_index)
+            if frame is not None:
+                out["frame"] = frame
+            return out
         # centroid_offset: the centred cloud in units of OFFSET_SCALE (spread ~1, not ~0.05 m, so the
         # geometry features are not swamped by the biases) and the offset predicted in the same units
         inp = (cloud - centroid[:, None, :]) / OFFSET_SCALE if self.translation == "centroid_offset" else cloud
@@ -376,11 +416,11 @@ class PoseNet(nn.Module):
             t = centroid + OFFSET_SCALE * t - torch.einsum("nij,nj->ni", R, self.centres[obj_index].to(R.dtype))
         return {"R": R, "t": t, "emb": emb, "att_r": wr, "att_t": wt}
 
-    def _dense(self, cloud, centroid, emb, obj_index):
-        """The dense head: the centred cloud in units of OFFSET_SCALE, per-point object coordinates as
-        offsets (same units) from the class's model-box centre, and a confidence logit."""
-        f = self.fuse((cloud - centroid[:, None, :]) / OFFSET_SCALE, emb)
-        n, p = len(obj_index), cloud.shape[1]
+    def _dense(self, centred, emb, obj_index):
+        """The dense head: the centred cloud (N, P, 3) in units of OFFSET_SCALE (in the input frame), per-point
+        object coordinates as offsets (same units) from the class's model-box centre, and a confidence logit."""
+        f = self.fuse(centred, emb)
+        n, p = len(obj_index), centred.shape[1]
         o = self.out_d(self.head_d(f)).view(n, self.num_classes, 4 + self.flips, p)[torch.arange(n), obj_index]
         coords = self.centres[obj_index].to(o.dtype)[:, None, :] + OFFSET_SCALE * o[:, :3].transpose(1, 2)
         out = {"coords": coords, "conf_logit": o[:, 3], "emb": emb}
@@ -427,7 +467,8 @@ class Refiner(nn.Module):
 def build_posenet(cfg, num_classes: int) -> PoseNet:
     """The :class:`PoseNet` of a :class:`~sixdpose.pose.config.PoseConfig`."""
     return PoseNet(num_classes, cfg.width, cfg.emb_dim, cfg.norm, cfg.rotation, cfg.translation,
-                   getattr(cfg, "head", "paper"), getattr(cfg, "flips", 0), getattr(cfg, "appearance", "cnn"))
+                   getattr(cfg, "head", "paper"), getattr(cfg, "flips", 0), getattr(cfg, "appearance", "cnn"),
+                   getattr(cfg, "input_frame", "camera"))
 
 
 def build_refiner(cfg, num_classes: int, emb_dim: int) -> Refiner:

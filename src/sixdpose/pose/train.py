@@ -36,7 +36,7 @@ from .data import FrameDataset, PoseError, collate_frames, collate_list, sample_
 from .dense import canonical_flip, coordinate_targets, dense_loss, flip_loss, model_symmetry, shape_flips
 from .geometry import compose_refinement, perturb_poses, to_object_frame
 from .loss import pose_loss
-from .model import build_posenet, build_refiner
+from .model import OFFSET_SCALE, build_posenet, build_refiner, pca_frame
 
 log = logging.getLogger("sixdpose.pose")
 __all__ = ["PoseTask", "TrainingError", "dataset_classes", "ensure_trained", "learning_rate",
@@ -206,13 +206,17 @@ class PoseTask(TrainTask):
             self._count(net, obj, ctx)
         if is_pose and cfg.head == "dense":
             tgs, labels = [], []
-            for i in insts:
+            frames = [None] * len(insts)
+            if getattr(cfg, "input_frame", "camera") == "pca":  # the canonical turn in the frame the network sees
+                cen = cloud.mean(dim=1)
+                frames = list(pca_frame((cloud - cen[:, None, :]) / OFFSET_SCALE, cen).double().cpu().numpy())
+            for i, fr in zip(insts, frames, strict=True):
                 fl = self.flips.get(i.obj_id)
                 if fl is None:  # the object's own symmetries: the loss takes the best candidate
                     tgs.append(coordinate_targets(i.cloud, i.R, i.t, self.symmetries[i.obj_id]))
                     labels.append(0)
                 else:  # a shape flip: the canonical turn's coordinates, the turn classified
-                    d = canonical_flip(i.R, fl)
+                    d = canonical_flip(i.R, fl, fr)
                     tgs.append(coordinate_targets(i.cloud, i.R, i.t, fl)[d:d + 1])
                     labels.append(d)
             S = max(len(x) for x in tgs)
