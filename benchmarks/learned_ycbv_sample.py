@@ -42,11 +42,11 @@ import sys
 from pathlib import Path
 
 from sixdpose.artifacts.results import earlier_rows, write_result
+from sixdpose.registration.presets import VAL_CHOSEN_VERIFY, as_set_args
 
 #: the verification's wider settings, chosen on the synthetic val split (never on the sample): the model's
 #: near-symmetries as hypotheses, the grey-detail texture term and the hypotheses recentred on the cloud
-WIDE = ["--set", "verify_near_symmetries=6", "--set", "verify_detail_share=0.5", "--set", "verify_detail_rel=0.1",
-        "--set", "verify_recentre=true"]
+WIDE = as_set_args({**VAL_CHOSEN_VERIFY, "verify_recentre": True})
 #: (variant label, file stem, predict-pose switches)
 VARIANTS = [("alone", "alone", []), ("+ ICP", "icp", ["--icp"]), ("+ verify", "verify", ["--verify"]),
             ("+ ICP + verify", "icp_verify", ["--icp", "--verify"]),

@@ -23,7 +23,7 @@ from sixdpose.datasets.readers import open_dataset
 from sixdpose.geometry import X_from
 from sixdpose.registration.geometry import ReferenceCache
 from sixdpose.registration.hypotheses import Frame, model_surface, near_symmetries, score_hypotheses
-from sixdpose.registration.presets import PRESETS
+from sixdpose.registration.presets import PRESETS, VAL_CHOSEN_VERIFY
 
 
 def main() -> None:
@@ -35,8 +35,7 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="a registration config field")
     a = ap.parse_args()
     ds = open_dataset(a.data)
-    over = {"verify_near_symmetries": 6, "verify_detail_share": 0.5, "verify_detail_rel": 0.1,
-            **parse_overrides(a.set)}
+    over = {**VAL_CHOSEN_VERIFY, **parse_overrides(a.set)}
     cfg = dataclasses.replace(PRESETS["default"], **over)
     cache = ReferenceCache(ds)
     objs = [int(o) for o in a.objs.split(",")] if a.objs else sorted(ds.object_ids)

@@ -31,9 +31,10 @@ from pathlib import Path
 
 from sixdpose.artifacts.poses import read_results_config
 from sixdpose.artifacts.results import write_result
+from sixdpose.registration.presets import VAL_CHOSEN_VERIFY, as_set_args
 
 #: the settings chosen on ``data/val`` (docs/registration.md, "Two opt-in extensions")
-NSD = ["--set", "verify_near_symmetries=6", "--set", "verify_detail_share=0.5", "--set", "verify_detail_rel=0.1"]
+NSD = as_set_args(VAL_CHOSEN_VERIFY)
 #: (column label, results CSV stem, register --method or None for the fusion of the two)
 RUNS = [("Super4PCS + ICP + verify", "super4pcs_icp_verify_nsd", "super4pcs"),
         ("RANSAC + ICP + verify", "ransac_icp_verify_nsd", "ransac"),

@@ -332,3 +332,20 @@ def test_samples_are_read_at_the_pixel_whose_centre_is_nearest():
     rgb[:, 1::2] = (51, 204, 51)
     sc = H.score_hypotheses(X(t=(0, 0, z))[None], surf, H.Frame(depth, K, mask, rgb), CFG)
     assert sc.texture[0] > 0.95
+
+
+def test_the_val_chosen_verify_settings_read_back_as_the_command_line_gives_them():
+    """One spelling of the settings chosen on val: ``as_set_args`` gives ``--set`` items that ``parse_overrides``
+    reads back to the same values, which the registration config accepts."""
+    import dataclasses
+
+    from sixdpose.config import parse_overrides
+    from sixdpose.registration.presets import PRESETS, VAL_CHOSEN_VERIFY, as_set_args
+
+    fields = {**VAL_CHOSEN_VERIFY, "verify_recentre": True}
+    args = as_set_args(fields)
+    assert args[::2] == ["--set"] * len(fields) and "verify_recentre=true" in args
+    assert parse_overrides(args[1::2]) == fields
+    cfg = dataclasses.replace(PRESETS["default"], **fields)
+    cfg.validate()
+    assert cfg.verify_near_symmetries == 6 and cfg.verify_recentre is True

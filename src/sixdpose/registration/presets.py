@@ -283,6 +283,17 @@ PRESETS: dict[str, RegistrationConfig] = {
 #: The presets themselves keep ``verify=False``: library callers switch it on per call.
 VERIFY_BY_DEFAULT: tuple[str, ...] = ("default", "fast")
 
+#: The verification's opt-in extensions with the values chosen on the synthetic ``val`` split
+#: (docs/registration.md, "Two opt-in extensions"): the model's near-symmetries as hypotheses and the
+#: grey-detail texture term; the benchmarks pass them as ``--set`` overrides (:func:`as_set_args`).
+VAL_CHOSEN_VERIFY: dict[str, float | int] = {"verify_near_symmetries": 6, "verify_detail_share": 0.5,
+                                             "verify_detail_rel": 0.1}
+
+
+def as_set_args(fields: dict) -> list[str]:
+    """``["--set", "key=value", ...]`` for the command line of ``register`` / ``predict-pose``."""
+    return [a for k, v in fields.items() for a in ("--set", f"{k}={str(v).lower() if isinstance(v, bool) else v}")]
+
 
 def verify_by_default(name: str) -> bool:
     """Whether ``sixdpose register --profile name`` verifies when neither ``--verify`` nor ``--no-verify``
