@@ -36,7 +36,7 @@ from .data import FrameDataset, PoseError, collate_frames, collate_list, sample_
 from .dense import canonical_flip, coordinate_targets, dense_loss, flip_loss, model_symmetry, shape_flips
 from .geometry import compose_refinement, perturb_poses, to_object_frame
 from .loss import pose_loss
-from .model import OFFSET_SCALE, build_posenet, build_refiner, pca_frame
+from .model import build_posenet, build_refiner
 
 log = logging.getLogger("sixdpose.pose")
 __all__ = ["PoseTask", "TrainingError", "dataset_classes", "ensure_trained", "learning_rate",
@@ -205,11 +205,11 @@ class PoseTask(TrainTask):
         if is_pose:
             self._count(net, obj, ctx)
         if is_pose and cfg.head == "dense":
+            with ctx.autocast():
+                out = net(images, img_index, choose, cloud, obj)
             tgs, labels = [], []
-            frames = [None] * len(insts)
-            if getattr(cfg, "input_frame", "camera") == "pca":  # the canonical turn in the frame the network sees
-                cen = cloud.mean(dim=1)
-                frames = list(pca_frame((cloud - cen[:, None, :]) / OFFSET_SCALE, cen).double().cpu().numpy())
+            # input_frame=pca: the canonical turn in the frame the network saw the cloud in (its output "frame")
+            frames = list(out["frame"].double().cpu().numpy()) if "frame" in out else [None] * len(insts)
             for i, fr in zip(insts, frames, strict=True):
                 fl = self.flips.get(i.obj_id)
                 if fl is None:  # the object's own symmetries: the loss takes the best candidate
@@ -221,8 +221,6 @@ class PoseTask(TrainTask):
                     labels.append(d)
             S = max(len(x) for x in tgs)
             tg = np.stack([np.concatenate([x, np.repeat(x[:1], S - len(x), axis=0)]) for x in tgs])
-            with ctx.autocast():
-                out = net(images, img_index, choose, cloud, obj)
             loss, _ = dense_loss(out["coords"].float(), out["conf_logit"].float(), torch.from_numpy(tg).to(dev),
                                  mode=cfg.dense_loss)
             if "flip_logit" in out:
