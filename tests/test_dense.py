@@ -283,6 +283,39 @@ def test_augment_changes_mask_and_depth_within_bounds():
     assert np.abs(d[mask & (d > 0)] - 1.0).max() < 0.1
 
 
+def test_occlusion_hides_one_side_of_the_mask_behind_a_straight_edge():
+    """``occlusion``: about half the instances lose up to that fraction of their mask, the removed part on one
+    side of a straight line (a half-plane), never the whole mask; depth is not touched; 0 is the identity."""
+    from sixdpose.pose.data import Augment
+
+    H, W = 60, 80
+    mask = np.zeros((H, W), bool)
+    mask[10:50, 20:60] = True
+    depth = np.full((H, W), 1.0, np.float32)
+    cut, fracs = 0, []
+    for s in range(60):
+        d = depth.copy()
+        out = Augment(occlusion=0.5).apply(mask, d, np.random.default_rng(s))
+        assert np.array_equal(d, depth) and (out <= mask).all() and out.any()
+        lost = mask & ~out
+        if not lost.any():
+            continue
+        cut += 1
+        fracs.append(lost.sum() / mask.sum())
+        # a half-plane: some line separates the lost pixels from the kept ones (checked over 360 directions)
+        v, u = np.nonzero(mask)
+        kept = out[v, u]
+        ok = False
+        for a in np.linspace(0, 2 * np.pi, 360, endpoint=False):
+            p = v * np.sin(a) + u * np.cos(a)
+            if p[~kept].min() >= p[kept].max() - 1.0:
+                ok = True
+                break
+        assert ok
+    assert 15 <= cut <= 45 and max(fracs) <= 0.5 + 0.05 and max(fracs) > 0.3
+    assert np.array_equal(Augment(occlusion=0.0).apply(mask, depth.copy(), np.random.default_rng(0)), mask)
+
+
 def test_crop_window_jitter_moves_and_scales_the_window():
     """Crop jitter moves and scales the window within its bounds; 0 gives the exact box window."""
     from sixdpose.pose.data import crop_window

@@ -421,3 +421,33 @@ def test_diverging_simulation_is_redrawn(tmp_path, ycb_dir, smoke_config):
     assert r["draws"] >= 2 and r["first_diverged"] and not r["first_at_rest"]
     record = json.loads((out / ".scenes" / "000000.json").read_text())
     assert record["attempt"] >= 1
+
+
+def test_placed_objects_start_on_a_face_of_their_box(ycb_dir):
+    """``placed_prob=1``: every object starts with one of its box axes straight down, turned about the
+    vertical at random; ``placed_prob=0`` draws the earlier versions' uniformly random orientations (no
+    axis vertical)."""
+    from sixdpose.assets import PhysicalProperties, load_catalog
+    from sixdpose.generation import profile
+    from sixdpose.generation.scene import default_pools, sample_scene, scene_rng
+
+    catalog = load_catalog(ycb_dir)
+    targets, noise = default_pools(catalog)
+    box = PhysicalProperties(np.array([0.01, -0.02, 0.05]), np.array([0.1, 0.06, 0.2]), 1.0, np.zeros(3), np.eye(3),
+                             True)
+    props = {n: box for n in targets + noise}
+    yaws = []
+    for placed, want_vertical in ((1.0, True), (0.0, False)):
+        cfg = profile("paper").replace(placed_prob=placed)
+        for s in range(5):
+            for spec in sample_scene(scene_rng(0, s), cfg, props, targets, noise):
+                R = spec.X_WO[:3, :3]
+                assert np.allclose(R @ R.T, np.eye(3), atol=1e-9) and np.isclose(np.linalg.det(R), 1)
+                down = -R[2, :]  # world -z in the object frame
+                vertical = np.isclose(np.abs(down).max(), 1.0, atol=1e-9)
+                assert vertical == want_vertical
+                if placed:
+                    yaws.append(np.arctan2(R[1, 0], R[0, 0]) if abs(R[2, 0]) < 0.5 else np.arctan2(R[1, 1], R[0, 1]))
+    assert np.ptp(yaws) > 3.0  # turned about the vertical, not one fixed heading
+    with pytest.raises(ValueError, match="placed_prob"):
+        profile("paper").replace(placed_prob=1.5).validate()

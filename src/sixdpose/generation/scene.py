@@ -53,6 +53,22 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
     )
 
 
+def face_down_rotation(rng: np.random.Generator) -> np.ndarray:
+    """A rotation R_WO (3, 3) that puts one of the object frame's six axis directions (uniformly chosen)
+    straight down (world -z), turned uniformly about the vertical: an object resting on a face of its
+    axis-aligned bounding box."""
+    a = int(rng.integers(3))
+    d = np.zeros(3)
+    d[a] = 1.0 if rng.random() < 0.5 else -1.0
+    e = np.zeros(3)
+    e[(a + 1) % 3] = 1.0
+    A = np.stack([e, np.cross(d, e), d], axis=1)  # right-handed: e x (d x e) = d
+    B = np.diag([1.0, -1.0, -1.0])  # their images: world x, -y, -z (right-handed)
+    yaw = rng.uniform(0, 2 * np.pi)
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]) @ B @ A.T
+
+
 def draw_objects(
     rng: np.random.Generator, cfg: GenerationConfig, targets: list[str], noise: list[str]
 ) -> list[tuple[str, str]]:
@@ -86,7 +102,10 @@ def sample_scene(
 
     Each object's bounding box is enclosed in a sphere; positions are re-drawn until no two spheres
     overlap, so no two objects start interpenetrating. With probability ``cfg.off_table_prob`` an
-    object is placed beyond the table edge, so it falls to the ground.
+    object is placed beyond the table edge, so it falls to the ground. With probability
+    ``cfg.placed_prob`` an object starts resting on a face of its bounding box
+    (:func:`face_down_rotation`), else in a uniformly random orientation (when it is 0 no extra number
+    is drawn, so the scenes are those of earlier versions).
     """
     names = draw_objects(rng, cfg, targets, noise)
     hx, hy = cfg.table_size[0] / 2, cfg.table_size[1] / 2
@@ -113,7 +132,8 @@ def sample_scene(
             if all(np.linalg.norm(p - q) > r + rq for q, rq in placed):
                 break
         placed.append((p, r))
-        R = random_rotation(rng)
+        placed_down = cfg.placed_prob > 0 and bool(rng.random() < cfg.placed_prob)
+        R = face_down_rotation(rng) if placed_down else random_rotation(rng)
         X = X_from(R, p - R @ pr.box_center)  # the box centre sits at p
         inst = inst_count.get(name, 0)
         inst_count[name] = inst + 1

@@ -139,6 +139,8 @@ class PoseConfig(FrameSchedule):
             random holes up to this fraction of the mask) and crop window (relative shift and scale), as
             real frames and predicted masks differ from rendered ones (:class:`~sixdpose.pose.data.Augment`;
             0: none, the paper).
+        occlusion: training augmentation: for half the instances, up to this fraction of the mask is hidden
+            beyond a straight edge in a random direction (an occluder in front; 0: none, the paper).
         max_images: train on the first N images only (0: all; the smoke profile uses a handful).
         repeat: each image is visited ``repeat`` times per epoch.
 
@@ -176,6 +178,7 @@ class PoseConfig(FrameSchedule):
     depth_noise: float = bounded(0.0, min=0, max=0.1)
     depth_holes: float = bounded(0.0, min=0, max=0.9)
     crop_jitter: float = bounded(0.0, min=0, max=0.5)
+    occlusion: float = bounded(0.0, min=0, max=0.9)
     lr: float = bounded(1e-4, min=0, max=10, min_open=True)
     warmup_steps: int = bounded(1000, min=0, max=100_000_000)
     lr_step_epochs: int = bounded(5, min=1, max=100_000)

@@ -238,7 +238,7 @@ def training_masks(sample, detections=None, iou_min: float = 0.5) -> list[tuple[
 class Augment:
     """Training-time augmentation of an instance's mask and depth, as real frames and predicted masks differ
     from rendered ones (all off by default; :class:`~sixdpose.pose.config.PoseConfig` fields of the same
-    meaning: ``mask_jitter_px``, ``depth_noise``, ``depth_holes``, ``crop_jitter``).
+    meaning: ``mask_jitter_px``, ``depth_noise``, ``depth_holes``, ``crop_jitter``, ``occlusion``).
 
     Attributes:
         mask_px: the mask is eroded or dilated by ``k ~ U{-mask_px..mask_px}`` pixels (a predicted mask's
@@ -249,18 +249,24 @@ class Augment:
         holes: largest fraction of the masked depth pixels removed as a few random discs (``U(0, holes)``
             of the mask's area; a real sensor's missing returns on dark or shiny parts).
         crop: crop-window jitter (:func:`crop_window`).
+        occlusion: largest fraction of the mask hidden behind a straight occluder edge: for half the instances
+            the pixels beyond a line across the mask (a uniformly random direction in the image) are removed,
+            ``U(0, occlusion)`` of the mask's area (an object in front hiding one side of this one, as real
+            scenes' objects standing behind others are; rendered clutter hides less).
     """
 
     mask_px: int = 0
     depth_noise: float = 0.0
     holes: float = 0.0
     crop: float = 0.0
+    occlusion: float = 0.0
 
     @classmethod
     def of(cls, cfg) -> Augment:
         """The augmentation of a config (a :class:`~sixdpose.pose.config.PoseConfig`; other configs: none)."""
         return cls(int(getattr(cfg, "mask_jitter_px", 0)), float(getattr(cfg, "depth_noise", 0.0)),
-                   float(getattr(cfg, "depth_holes", 0.0)), float(getattr(cfg, "crop_jitter", 0.0)))
+                   float(getattr(cfg, "depth_holes", 0.0)), float(getattr(cfg, "crop_jitter", 0.0)),
+                   float(getattr(cfg, "occlusion", 0.0)))
 
     @property
     def touches_depth(self) -> bool:
@@ -288,6 +294,15 @@ class Augment:
         elif k < 0:
             eroded = ndimage.binary_erosion(sub, iterations=-k)
             sub = eroded if eroded.any() else sub
+        if self.occlusion > 0 and rng.random() < 0.5:
+            sv, su = np.nonzero(sub)
+            a = rng.uniform(0.0, 2 * np.pi)
+            proj = sv * np.sin(a) + su * np.cos(a)
+            frac = rng.uniform(0.0, self.occlusion)
+            if frac > 0 and len(proj):
+                cut = proj > np.quantile(proj, 1.0 - frac)
+                sub = sub.copy()
+                sub[sv[cut], su[cut]] = False
         out = np.zeros_like(mask)
         out[r0:r1, c0:c1] = sub
         if not self.touches_depth:
