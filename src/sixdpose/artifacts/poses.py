@@ -38,6 +38,14 @@ def results_config_path(path: str | Path) -> Path:
     return path.with_name(path.stem + ".config.yml")
 
 
+def write_results_config(path: str | Path, settings: dict) -> Path:
+    """Write the settings a results CSV was made with to its :func:`results_config_path` (YAML, keys
+    sorted, atomically); ``path`` is the CSV's. Returns the settings file's path."""
+    import yaml
+
+    return atomic_write_text(results_config_path(path), yaml.safe_dump(settings, sort_keys=True))
+
+
 def read_results_config(path: str | Path) -> dict | None:
     """The settings a results CSV was made with (its :func:`results_config_path`), or None when that file is
     missing, unreadable or not a YAML mapping."""

@@ -70,10 +70,8 @@ def _cmd_train_refiner(args) -> int:
 
 
 def _cmd_predict(args) -> int:
-    import yaml
-
-    from ..artifacts.poses import RESULTS_HEADER, results_config_path, write_results
-    from ..fileio import atomic_write_text, claim_output_file
+    from ..artifacts.poses import RESULTS_HEADER, write_results, write_results_config
+    from ..fileio import claim_output_file
     from .infer import check_inference_overrides, predict_dataset
 
     setup_logging(args.verbose)
@@ -101,7 +99,7 @@ def _cmd_predict(args) -> int:
     )
     write_results(rows, out)
     settings = dict(est.settings(), data=str(args.data), masks=args.masks, split=args.split, limit=args.limit)
-    atomic_write_text(results_config_path(out), yaml.safe_dump(settings, sort_keys=True))
+    write_results_config(out, settings)
     failed = sum(1 for r in rows if r.score == 0)
     times = {(r.scene_id, r.im_id): r.time for r in rows}
     fps = len(times) / sum(times.values()) if times and sum(times.values()) > 0 else float("nan")

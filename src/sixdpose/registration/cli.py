@@ -43,12 +43,10 @@ def register(sub) -> None:
 def _run(args) -> int:
     from pathlib import Path
 
-    import yaml
-
-    from ..artifacts.poses import RESULTS_HEADER, results_config_path, write_results
+    from ..artifacts.poses import RESULTS_HEADER, write_results, write_results_config
     from ..artifacts.tables import write_table
     from ..datasets.readers import open_dataset
-    from ..fileio import atomic_write_text, claim_output_file
+    from ..fileio import claim_output_file
     from .presets import get_preset, verify_by_default
     from .runner import run_registration
 
@@ -72,8 +70,7 @@ def _run(args) -> int:
                             progress=not args.no_progress, indices=indices, failures=failures, timing=timing)
     write_results(rows, out)
     # the config, and the objects' onboarding seconds that the CSV's per-image times leave out
-    atomic_write_text(results_config_path(out), yaml.safe_dump(
-        {**cfg.to_dict(), "onboarding_s": round(timing.get("onboarding_s", 0.0), 3)}, sort_keys=True))
+    write_results_config(out, {**cfg.to_dict(), "onboarding_s": round(timing.get("onboarding_s", 0.0), 3)})
     n_bad = sum(1 for r in rows if r.reason)
     msg = f"wrote {len(rows)} estimates ({n_bad} with score 0) to {out}"
     if timing.get("onboarding_s"):
