@@ -75,7 +75,7 @@ YCBV_DENSE_cpu   := --profile cpu $(YCBV_DENSE_AUG) $(DENSE_SHAPE) --set crop=96
 	--set time_budget=0
 YCBV_DENSE_paper := --profile paper $(YCBV_DENSE_AUG) $(DENSE_SHAPE)
 # the dense head on the graph's own training data (runs/P/pose_dense: the `dense` rows of Tables I-III): the
-# same recipe; cpu: 12 epochs with the learning rate stepped every 4 (3,600 steps); smoke and demo
+# same recipe; cpu: 12 epochs with the learning rate stepped every 4 (3,600 steps, 51 min here); smoke and demo
 # (pipeline checks): the smoke profile with the dense head
 DENSE_smoke := --profile smoke --set head=dense --set norm=group --set dense_loss=decoupled
 DENSE_demo  := $(DENSE_smoke)
