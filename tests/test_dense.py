@@ -572,7 +572,7 @@ def test_geometry_only_run_names_the_turn_by_the_model_colours(tmp_path):
         R, t = Rotation.from_rotvec(rng.normal(size=3) * 0.4).as_matrix() @ fl.R[e], np.array([0.0, 0.01, 0.55])
         p_C = P @ R.T + t
         near = p_C[:, 2] < np.percentile(p_C[:, 2], 40)
-        inst = SimpleNamespace(obj_id=2, points=p_C[near], colors=cols[near])
+        inst = SimpleNamespace(obj_id=2, points=p_C[near], colors=cols[near], score=1.0)
         d = canonical_flip(R, fl)
         Rc, tc = R @ fl.R[d], R @ fl.t[d] + t  # what the fit of canonical coordinates gives
         assert est._colour_flip(inst, Rc, tc, 0) == d
@@ -655,7 +655,7 @@ def test_with_icp_the_colours_name_the_turn_after_icp(tmp_path):
     R, t = Rotation.from_rotvec([0.35, -0.3, 0.2]).as_matrix() @ fl.R[1], np.array([0.0, 0.01, 0.55])
     p_C = P @ R.T + t
     near = p_C[:, 2] < np.percentile(p_C[:, 2], 40)
-    inst = SimpleNamespace(obj_id=2, points=p_C[near], colors=cols[near])
+    inst = SimpleNamespace(obj_id=2, points=p_C[near], colors=cols[near], score=1.0)
     d = canonical_flip(R, fl)
     Rc, tc = R @ fl.R[d], R @ fl.t[d] + t
     off = tc + Rc @ np.array([0.0, -0.03, 0.0])  # 3 cm across the box, half its width
@@ -665,6 +665,25 @@ def test_with_icp_the_colours_name_the_turn_after_icp(tmp_path):
     calls = []
     icp = est._icp
     est._icp = lambda *a: calls.append(1) or icp(*a)
+    # _post does not run that ICP again where the canonical turn was kept (icp_done), and does where a turn was
+    # named (a near-symmetry only): every refine_pose is the naming ICP's or a _post of a turned pose
+    import sixdpose.registration as registration
+
+    refines, done = [], []
+    refine = registration.refine_pose
+    monkey = pytest.MonkeyPatch()
+    monkey.setattr(registration, "refine_pose", lambda *a, **k: refines.append(1) or refine(*a, **k))
+    post = est._post
+    est._post = lambda *a, icp_done=False: done.append(icp_done) or post(*a, icp_done=icp_done)
     s = reader.load(reader.keys()[0])
-    rows = est.predict(s)
-    assert len(calls) == len(rows) == 1
+    try:
+        rows = est.predict(s)
+        assert len(calls) == len(rows) == len(done) == 1
+        assert len(refines) == len(calls) + sum(not d for d in done)
+        n = len(refines)
+        kept = est._post(inst, Ri, ti, icp_done=True)
+        assert kept[0] is Ri and kept[1] is ti and len(refines) == n
+        R2, t2, _ = est._post(inst, Rc, off, icp_done=False)
+        assert len(refines) == n + 1 and np.linalg.norm(t2 - off) > 0.005
+    finally:
+        monkey.undo()

@@ -348,13 +348,14 @@ class Estimator:
             chunk = usable[s:s + step]
             batch = collate_frames([Frame(None if self.cfg.crop else sample.rgb, chunk)], self.class_index)
             if self.dense:
-                R, t = self._dense_poses(batch, chunk, np.random.default_rng([self.seed, int(sample.scene_id),
-                                                                              int(sample.im_id), 1]))
+                R, t, icp_done = self._dense_poses(batch, chunk, np.random.default_rng(
+                    [self.seed, int(sample.scene_id), int(sample.im_id), 1]))
             else:
                 R, t = run_networks(self.net, self.refiner, batch, self.iterations, self.device, amp=True)
-            for inst, Ri, ti in zip(chunk, R, t, strict=True):
+                icp_done = np.zeros(len(chunk), bool)
+            for inst, Ri, ti, done in zip(chunk, R, t, icp_done, strict=True):
                 Ri = _orthonormalise(Ri)
-                Ri, ti, score = self._post(inst, Ri, ti, sample, items[inst.index][2])
+                Ri, ti, score = self._post(inst, Ri, ti, sample, items[inst.index][2], icp_done=bool(done))
                 rows[inst.index] = PoseEstimate(sample.scene_id, sample.im_id, inst.obj_id, score, Ri, ti)
         dt = time.perf_counter() - t0
         if self._cache is not None:  # the objects' first-use model-side data: onboarding, not the image's time
@@ -367,10 +368,12 @@ class Estimator:
                 log.info("scene %d image %d obj %d: %s", r.scene_id, r.im_id, r.obj_id, r.reason)
         return rows
 
-    def _dense_poses(self, batch: dict, insts, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    def _dense_poses(self, batch: dict, insts, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Poses of a dense-head batch: per-point object coordinates and confidences from the network, then
         :func:`~sixdpose.pose.dense.ransac_kabsch` of the coordinates onto each instance's sampled cloud.
-        Returns ``(R (N, 3, 3), t (N, 3))`` float64, ``X_CO`` in metres."""
+        Returns ``(R (N, 3, 3), t (N, 3), icp_done (N,) bool)``: ``X_CO`` in metres (float64) and whether the
+        pose is already the ICP's (ICP ran to name the colour turn and the canonical turn was kept), so that
+        :meth:`_post` does not run the same ICP again from where it stopped."""
         from .dense import ransac_kabsch
 
         dev = self.device
@@ -381,7 +384,7 @@ class Estimator:
         conf = torch.sigmoid(out["conf_logit"].float()).cpu().double().numpy()
         flip = (out["flip_logit"].float().argmax(dim=1).cpu().numpy() if "flip_logit" in out
                 else np.zeros(len(insts), int))
-        Rs, ts = [], []
+        Rs, ts, done = [], [], []
         for k, (inst, y, c) in enumerate(zip(insts, coords, conf, strict=True)):
             R, t, _ = ransac_kabsch(y, inst.cloud, c, threshold=self.cfg.ransac_threshold,
                                     iterations=self.cfg.ransac_iterations, rng=rng)
@@ -391,13 +394,18 @@ class Estimator:
                 # often a couple of centimetres off, enough for the print of the wrong turn to agree better,
                 # and the turns are symmetries of the shape, so one ICP serves them all
                 R, t = self._icp(inst, R, t)
+                icp_ran = self._cache is not None
+            else:
+                icp_ran = False
             d = self._colour_flip(inst, R, t, ci) if self.colour_flips else None
             d = int(flip[k]) if d is None else d
-            if d:  # the coordinates are the canonical turn's: back to the named turn
+            if d:  # the coordinates are the canonical turn's: back to the named turn (a near-symmetry of the
+                # shape only, so ICP runs again on it in _post)
                 R, t = self._turned(R, t, ci, d)
             Rs.append(R)
             ts.append(t)
-        return np.stack(Rs), np.stack(ts)
+            done.append(icp_ran and not d)
+        return np.stack(Rs), np.stack(ts), np.array(done, bool)
 
     def _icp(self, inst, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The pose ``(R, t)`` of one instance after the hybrid stage's ICP alone (no colour check, no
@@ -445,15 +453,17 @@ class Estimator:
                 self._diameters[obj_id] = 0.0
         return self._diameters[obj_id]
 
-    def _post(self, inst, R, t, sample=None, mask=None):
+    def _post(self, inst, R, t, sample=None, mask=None, icp_done: bool = False):
         """Optional ICP, colour check and hypothesis verification of one pose: the hybrid stage's
         refinement chain (:func:`sixdpose.registration.refine_pose`, ``default`` preset); ``sample`` and
-        the instance's ``mask`` are the frame of the verification.
+        the instance's ``mask`` are the frame of the verification. ``icp_done``: the pose is already the
+        ICP's (:meth:`_dense_poses`); with ICP alone asked for, it is then returned as it is.
 
         Returns ``(R, t, score)``: the score is the instance's (the detection's, 1 with GT masks) unless
         the verification ran, whose score in (0, 1] it then is, as ``register --verify`` writes (floored
         at :data:`MIN_VERIFIED_SCORE`, so verifying never turns a pose into "no estimate")."""
-        if not (self.icp or self.colour_verify or self.verify):
+        checks = self.colour_verify or self.verify
+        if not (self.icp or checks) or (icp_done and not checks):
             return R, t, inst.score
         from ..registration import Frame, refine_pose
 
