@@ -469,6 +469,7 @@ class Estimator:
 
         frame = Frame(sample.depth, sample.K, np.asarray(mask, dtype=bool), sample.rgb) if (
             self.verify and sample is not None and mask is not None) else None
+        assert self._cache is not None  # _setup builds it whenever ICP or a check is asked for
         r = refine_pose(X_from(R, t), inst.points, inst.obj_id, self._cache, self.reg_cfg, icp=self.icp,
                         colour_verify=self.colour_verify, colors=inst.colors, frame=frame)
         X_CO, verified = r.X_CO, float(r.score)
