@@ -5,7 +5,7 @@ Usage::
     python benchmarks/pose.py [--profile cpu|smoke|paper] [--head paper|dense] [--pose RUN --refiner RUN2]
                               [--device cpu|cuda]
                               [--instances 6] [--frames 10] [--steps 10] [--threads N] [--json OUT]
-                              [--seg SEG_RUN --data DIR]
+                              [--seg SEG_RUN | --seg-profile cpu|smoke|paper] [--data DIR[@SPLIT]]
                               [--results-dir results] [--result-name pose_<profile>_<device>] [--no-result]
 
 * Training throughput (instances/s): optimiser steps of the main network and of the refiner
@@ -25,6 +25,12 @@ Usage::
 * With ``--seg SEG_RUN --data DIR`` (trained runs): end-to-end FPS on the dataset's first ``--frames``
   real frames, loaded into memory first: Mask R-CNN on the RGB image, then the pose network and 2
   refinement iterations on every detection of the frame in one batch (section V-A: disk reads excluded).
+* With ``--seg-profile PROFILE --data DIR`` instead (no trained segmentation run at hand, e.g. on a lent GPU
+  machine): end-to-end FPS with an untrained Mask R-CNN of that segmentation profile's architecture, made to
+  return as many detections as the frame has objects (score threshold 0, ``detections_per_img`` = the
+  frame's instance count), so its cost is that of a trained network finding them; the pose stage then runs
+  on the frame's ground-truth masks (an untrained network's masks are noise). The cost of Mask R-CNN does
+  not depend on its weights once the number of detections is fixed.
 * Peak memory: CPU: the process' peak resident set size (MiB); CUDA: ``torch.cuda.max_memory_allocated``.
 
 The figures are also written as the result artifact ``results/pose_<profile>_<device>.json``
@@ -197,18 +203,51 @@ def inference_fps(pose, refiner, device, instances: int, frames: int, data: str 
             "infer_instances_per_frame": n_inst}
 
 
-def end_to_end_fps(seg, pose, refiner, data, device, frames: int) -> dict:
-    """Frames per second of segmentation + pose + 2 refinement iterations on a dataset's first frames."""
+def untrained_seg(profile: str, pose, tmp: Path) -> Path:
+    """An untrained Mask R-CNN checkpoint of segmentation profile ``profile`` with the pose run's classes
+    (for timing only: :func:`end_to_end_fps` with ``untrained=True``)."""
+    from sixdpose.segmentation import checkpoint as seg_ck
+    from sixdpose.segmentation.config import profile_config as seg_profile_config
+    from sixdpose.segmentation.model import build_model
+
+    cfg = seg_profile_config(profile, pretrained=False)
+    classes = [[int(c[0]), str(c[1])] for c in ck.load(pose, kind="pose")["classes"]]
+    model, init = build_model(cfg, len(classes), verbose=False)
+    save_checkpoint({"format": seg_ck.FORMAT, "version": seg_ck.CHECKPOINT_VERSION, "config": cfg.to_dict(),
+                     "classes": classes, "init": init, "epoch": 0, "global_step": 0, "elapsed": 0.0,
+                     "model": model.state_dict()}, tmp / "seg.pt")
+    return tmp / "seg.pt"
+
+
+def end_to_end_fps(seg, pose, refiner, data, device, frames: int, untrained: bool = False) -> dict:
+    """Frames per second of segmentation + pose + 2 refinement iterations on a dataset's first frames.
+
+    ``untrained``: ``seg`` is an untrained network (:func:`untrained_seg`): it is made to return as many
+    detections as each frame has objects, and the pose stage runs on the ground-truth masks."""
     from sixdpose.artifacts.predictions import Detection
     from sixdpose.datasets import as_reader
     from sixdpose.segmentation.infer import Segmenter
 
     path, _, split = data.partition("@")
     reader = as_reader(path, split=split or "test")
-    samples = [reader.load(k, masks=False) for k in reader.keys()[: frames + 1]]  # disk reads not timed
-    segm = Segmenter(seg, device=str(device))
+    samples = [reader.load(k, masks=untrained) for k in reader.keys()[: frames + 1]]  # disk reads not timed
     est = Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device),
                     reader=reader)  # scores >= 0.5, as predict-pose; the reader for flips named by colour
+    if untrained:
+        segms = {n: Segmenter(seg, device=str(device), score_thresh=0.0, overrides={"detections_per_img": n})
+                 for n in {max(len(s.instances), 1) for s in samples}}
+
+        def run_gt(sample):
+            out = segms[max(len(sample.instances), 1)].predict([sample.rgb])[0]
+            return est.predict(sample), len(out["labels"])
+
+        run_gt(samples[0])  # warm-up
+        n_det = []
+        times = timed(lambda s: n_det.append(run_gt(s)[1]), samples[1:], device)
+        return {"e2e_fps": 1.0 / float(np.mean(times)), "e2e_ms_per_frame": 1000 * float(np.mean(times)),
+                "e2e_detections_per_frame": sum(n_det) / max(len(times), 1), "e2e_frames": len(times),
+                "e2e_segmentation": "untrained, detections fixed to the frame's objects; pose on GT masks"}
+    segm = Segmenter(seg, device=str(device))
 
     def run(sample):
         out = segm.predict([sample.rgb])[0]
@@ -241,13 +280,20 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--json", default=None)
     ap.add_argument("--seg", default=None, help="a trained segmentation run: also time segmentation + pose end to end")
+    ap.add_argument("--seg-profile", default=None, choices=("smoke", "cpu", "paper"),
+                    help="time end to end with an untrained Mask R-CNN of this segmentation profile instead of "
+                         "--seg (detections fixed to the frame's objects, pose on GT masks)")
     ap.add_argument("--data", default=None,
                     help="PATH[@SPLIT]: time inference on its first --frames frames (GT masks; with --seg, end to "
                          "end on the segmentation's masks as well) instead of a synthetic frame")
     add_result_arguments(ap, None, Path(__file__).resolve().parents[1] / "results", "pose_<profile>_<device>")
     a = ap.parse_args(argv)
-    if (a.seg and a.data is None) or (a.seg and not a.pose) or (a.data and not a.pose):
-        print("--seg needs --data, and both need --pose (and --refiner)", file=sys.stderr)
+    if a.seg and a.seg_profile:
+        print("--seg and --seg-profile exclude each other", file=sys.stderr)
+        return 2
+    seg_any = a.seg or a.seg_profile
+    if (seg_any and a.data is None) or (seg_any and not a.pose) or (a.data and not a.pose):
+        print("--seg/--seg-profile need --data, and both need --pose (and --refiner)", file=sys.stderr)
         return 2
     if a.appearance != "cnn" and a.head != "dense":
         print("--appearance other than cnn needs --head dense", file=sys.stderr)
@@ -274,6 +320,9 @@ def main(argv=None) -> int:
         out["infer_peak_mib"] = peak_mib(device)
         if a.seg:
             out.update(end_to_end_fps(a.seg, pose, ref, a.data, device, a.frames))
+        elif a.seg_profile:
+            seg = untrained_seg(a.seg_profile, pose, Path(tmp))
+            out.update(end_to_end_fps(seg, pose, ref, a.data, device, a.frames, untrained=True))
         if device.type == "cuda":
             torch.cuda.reset_peak_memory_stats(device)
         out.update(train_throughput(a.profile, device, a.steps, a.instances, head=head, appearance=appearance,
@@ -294,11 +343,14 @@ def main(argv=None) -> int:
                                   else f"(dense head, {appearance} embedding, RANSAC fit)")
                                + (f" on {a.data} (GT masks)" if a.data else "")
                                + ", training instances/s, peak memory"
-                               + ("; end to end with segmentation on " + Path(a.data).name if a.seg else ""),
+                               + ("; end to end with segmentation on " + Path(a.data).name if a.seg else "")
+                               + (f"; end to end with an untrained {a.seg_profile} Mask R-CNN (detections fixed "
+                                  "to the frame's objects, pose on GT masks) on " + Path(a.data).name
+                                  if a.seg_profile else ""),
                    config={"profile": a.profile, "head": head, "appearance": appearance, "pose": a.pose,
                            "refiner": a.refiner,
                            "device": a.device, "instances": a.instances, "frames": a.frames, "steps": a.steps,
-                           "threads": a.threads, "seg": a.seg, "data": a.data,
+                           "threads": a.threads, "seg": a.seg, "seg_profile": a.seg_profile, "data": a.data,
                            "pose_config": profile_config(a.profile, {"head": head, "appearance": appearance}).to_dict()
                            if not a.pose else None})
     return 0

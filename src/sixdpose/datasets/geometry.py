@@ -9,6 +9,16 @@ from __future__ import annotations
 import numpy as np
 
 
+def mask_box(mask: np.ndarray) -> tuple[int, int, int, int] | None:
+    """The bounding box ``(v0, v1, u0, u1)`` (rows ``v0:v1``, columns ``u0:u1``, ends exclusive) of the true
+    pixels of an (H, W) bool mask, or ``None`` when it has none (two axis reductions instead of a full
+    ``nonzero``: a few times faster on a 640x480 mask holding one object)."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if len(rows) == 0:
+        return None
+    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+
+
 def backproject(
     depth: np.ndarray, K: np.ndarray, mask: np.ndarray | None = None, rgb: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
@@ -28,13 +38,19 @@ def backproject(
     depth = np.asarray(depth)
     if depth.ndim != 2:
         raise ValueError(f"depth must be (H, W), got shape {depth.shape}")
-    valid = np.isfinite(depth) & (depth > 0)
+    v0, u0 = 0, 0
     if mask is not None:
         mask = np.asarray(mask, dtype=bool)
         if mask.shape != depth.shape:
             raise ValueError(f"mask shape {mask.shape} does not match depth shape {depth.shape}")
-        valid &= mask
+        box = mask_box(mask)  # work inside the mask's box only: the same points, in the same order
+        v0, v1, u0, u1 = box if box is not None else (0, 0, 0, 0)
+        sub = depth[v0:v1, u0:u1]
+        valid = np.isfinite(sub) & (sub > 0) & mask[v0:v1, u0:u1]
+    else:
+        valid = np.isfinite(depth) & (depth > 0)
     v, u = np.nonzero(valid)
+    v, u = v + v0, u + u0
     z = depth[v, u].astype(np.float64)
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     pts = np.empty((len(z), 3), dtype=np.float64)

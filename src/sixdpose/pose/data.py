@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from ..datasets.geometry import backproject
+from ..datasets.geometry import backproject, mask_box
 from ..errors import SixdposeError
 
 #: ImageNet statistics used to normalise [0, 1] colours before the CNN.
@@ -68,8 +68,10 @@ def crop_window(mask: np.ndarray, margin: float, jitter: float = 0.0,
     ``jitter`` > 0 (training only, needs ``rng``): the side is scaled by ``exp(U(-jitter, jitter))`` and
     the centre moved by ``U(-jitter, jitter) * side / 2`` along each axis, as a detector's box would vary.
     """
-    v, u = np.nonzero(mask)
-    v0, v1, u0, u1 = v.min(), v.max() + 1, u.min(), u.max() + 1
+    box = mask_box(np.asarray(mask, dtype=bool))
+    if box is None:
+        raise ValueError("crop_window: the mask is empty")
+    v0, v1, u0, u1 = box
     side = max(float(max(v1 - v0, u1 - u0)) * (1.0 + 2.0 * margin), 8.0)
     cy, cx = (v0 + v1) / 2.0, (u0 + u1) / 2.0
     if jitter > 0 and rng is not None:
@@ -115,7 +117,7 @@ def extract_instance(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, mask: np
     """
     mask = np.asarray(mask, dtype=bool)
     pts, col, pix = backproject(depth, K, mask, rgb if keep_points else None)
-    if depth_band > 0 and len(pts):
+    if depth_band > 0 and len(pts) and float(np.ptp(pts[:, 2])) > depth_band:  # else every point is in the band
         keep = np.abs(pts[:, 2] - np.median(pts[:, 2])) <= depth_band
         pts, pix = pts[keep], pix[keep]
         col = col[keep] if col is not None else None

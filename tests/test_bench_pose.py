@@ -1,0 +1,36 @@
+"""benchmarks/pose.py: the end-to-end timing with an untrained Mask R-CNN of a profile (``--seg-profile``)."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+from test_reg_helpers import write_synthetic_dataset
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location("bench_pose", REPO / "benchmarks" / "pose.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_seg_profile_times_segmentation_and_pose_on_every_frame(tmp_path, capsys):
+    """An untrained smoke Mask R-CNN made to return each frame's object count, then the dense head on the GT
+    masks: the end-to-end figures are written, with as many detections per frame as the frames have objects;
+    --seg and --seg-profile together, or --seg-profile without --data, are refused with exit status 2."""
+    bench = _bench()
+    data = write_synthetic_dataset(tmp_path / "d", n_images=3)
+    pose, _ = bench.fake_runs("smoke", tmp_path, classes=16, head="dense", appearance="local")
+    out = tmp_path / "out.json"
+    args = ["--profile", "smoke", "--pose", str(pose), "--data", str(data), "--seg-profile", "smoke",
+            "--frames", "2", "--steps", "1", "--no-result", "--json", str(out)]
+    assert bench.main(args) == 0
+    fig = json.loads(out.read_text())
+    assert fig["e2e_frames"] == 2 and fig["e2e_fps"] > 0 and fig["infer_fps"] > 0
+    assert fig["e2e_detections_per_frame"] == fig["infer_instances_per_frame"] == 1.0  # frames 1 and 2: one object
+    assert "untrained" in fig["e2e_segmentation"]
+    assert bench.main(args + ["--seg", str(tmp_path)]) == 2
+    assert bench.main(["--pose", str(pose), "--seg-profile", "smoke", "--no-result"]) == 2
+    assert "--seg/--seg-profile need --data" in capsys.readouterr().err
