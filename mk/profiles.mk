@@ -72,8 +72,9 @@ YCBV_POSE_LONG_paper := --profile paper
 YCBV_DENSE_AUG   := --set head=dense --set norm=group --set dense_loss=decoupled --set colour_jitter=0.3 \
 	--set mask_jitter_px=3 --set depth_noise=0.004 --set depth_holes=0.2 --set crop_jitter=0.1
 DENSE_SHAPE      := --set appearance=local --set flips=4 --set width=0.5 --set ema_decay=0.998 --set input_frame=pca
-YCBV_DENSE_cpu   := --profile cpu $(YCBV_DENSE_AUG) $(DENSE_SHAPE) --set crop=96 --set epochs=24 --set lr_step_epochs=8 \
-	--set time_budget=0
+# the cpu profile's dense recipe, its length aside (both branches below add their epochs and learning-rate steps)
+DENSE_CPU_BASE   := --profile cpu $(YCBV_DENSE_AUG) $(DENSE_SHAPE) --set crop=96 --set time_budget=0
+YCBV_DENSE_cpu   := $(DENSE_CPU_BASE) --set epochs=24 --set lr_step_epochs=8
 YCBV_DENSE_paper := --profile paper $(YCBV_DENSE_AUG) $(DENSE_SHAPE)
 # the dense head on the graph's own training data (runs/P/pose_dense: the `dense` rows of Tables I-III): the
 # same recipe; cpu: 12 epochs with the learning rate stepped every 4 (3,600 steps, 51 min here: the rows of
@@ -81,8 +82,7 @@ YCBV_DENSE_paper := --profile paper $(YCBV_DENSE_AUG) $(DENSE_SHAPE)
 # (pipeline checks): the smoke profile with the dense head
 DENSE_smoke := --profile smoke --set head=dense --set norm=group --set dense_loss=decoupled
 DENSE_demo  := $(DENSE_smoke)
-DENSE_cpu   := --profile cpu $(YCBV_DENSE_AUG) $(DENSE_SHAPE) --set crop=96 --set epochs=12 --set lr_step_epochs=4 \
-	--set time_budget=0
+DENSE_cpu   := $(DENSE_CPU_BASE) --set epochs=12 --set lr_step_epochs=4
 DENSE_paper := $(YCBV_DENSE_paper)
 
 # `sixdpose pose-ablation` (notebook 05 shows its result results/P/pose_ablation_P.json): the budget of every

@@ -634,7 +634,7 @@ def test_pca_input_frame_makes_the_dense_head_blind_to_turns_of_the_view(tmp_pat
     _predict_proper_poses(ds, tmp_path / "r", tmp_path / "res.csv", 2, (0.4, 0.7))
 
 
-def test_with_icp_the_colours_name_the_turn_after_icp(tmp_path):
+def test_with_icp_the_colours_name_the_turn_after_icp(tmp_path, monkeypatch):
     """With ``--icp`` a run whose flips are named by the model's colours names the turn after ICP of the fitted
     canonical pose: a fit a few centimetres off across the box makes the quadrant colours name another turn, ICP
     brings the pose onto the cloud (the turns are symmetries of the shape, so one ICP serves them all) and the
@@ -671,19 +671,15 @@ def test_with_icp_the_colours_name_the_turn_after_icp(tmp_path):
 
     refines, done = [], []
     refine = registration.refine_pose
-    monkey = pytest.MonkeyPatch()
-    monkey.setattr(registration, "refine_pose", lambda *a, **k: refines.append(1) or refine(*a, **k))
+    monkeypatch.setattr(registration, "refine_pose", lambda *a, **k: refines.append(1) or refine(*a, **k))
     post = est._post
     est._post = lambda *a, icp_done=False: done.append(icp_done) or post(*a, icp_done=icp_done)
     s = reader.load(reader.keys()[0])
-    try:
-        rows = est.predict(s)
-        assert len(calls) == len(rows) == len(done) == 1
-        assert len(refines) == len(calls) + sum(not d for d in done)
-        n = len(refines)
-        kept = est._post(inst, Ri, ti, icp_done=True)
-        assert kept[0] is Ri and kept[1] is ti and len(refines) == n
-        R2, t2, _ = est._post(inst, Rc, off, icp_done=False)
-        assert len(refines) == n + 1 and np.linalg.norm(t2 - off) > 0.005
-    finally:
-        monkey.undo()
+    rows = est.predict(s)
+    assert len(calls) == len(rows) == len(done) == 1
+    assert len(refines) == len(calls) + sum(not d for d in done)
+    n = len(refines)
+    kept = est._post(inst, Ri, ti, icp_done=True)
+    assert kept[0] is Ri and kept[1] is ti and len(refines) == n
+    R2, t2, _ = est._post(inst, Rc, off, icp_done=False)
+    assert len(refines) == n + 1 and np.linalg.norm(t2 - off) > 0.005
