@@ -57,6 +57,36 @@ def test_weighted_kabsch_exact_and_ransac_recovers_pose_with_outliers():
         ransac_kabsch(src[:2], dst[:2])
 
 
+def test_ransac_scores_every_hypothesis_as_the_direct_distance_would():
+    """ransac_kabsch scores hypotheses with |R s + t - d|^2 expanded into matrix products (speed): the chosen
+    hypothesis, its refits and inliers are those of the direct per-point distance, hypotheses drawn alike."""
+    from sixdpose.registration.super4pcs import kabsch_batch
+
+    for trial in range(20):
+        rng = np.random.default_rng(trial)
+        K = int(rng.integers(3, 600))
+        src = rng.normal(0, 0.05, size=(K, 3))
+        dst = src @ Rotation.random(random_state=trial).as_matrix().T + rng.normal(0, 0.5, 3) + [0, 0, 0.7]
+        dst += rng.normal(0, 0.003, size=dst.shape)
+        dst[: K // 3] += rng.normal(0, 0.05, size=(K // 3, 3))
+        w = rng.uniform(0.1, 1.0, K)
+        thr = (0.01, 0.015, 0.06)[trial % 3]
+        R, t, inl = ransac_kabsch(src, dst, w, threshold=thr, iterations=64, rng=np.random.default_rng(trial))
+        draw = np.random.default_rng(trial).choice(K, size=(64, 3), p=w / w.sum())
+        Rs, ts = kabsch_batch(src[draw], dst[draw])
+        res = np.linalg.norm(src[None] @ Rs.transpose(0, 2, 1) + ts[:, None] - dst[None], axis=2)  # (M, K)
+        best = int(np.argmax(((res < thr) * w).sum(axis=1)))
+        Rb, tb, ref = Rs[best], ts[best], res[best] < thr
+        for _ in range(2):
+            if ref.sum() < 3:
+                break
+            Rb, tb = weighted_kabsch(src[ref], dst[ref], w[ref])
+            ref = np.linalg.norm(src @ Rb.T + tb - dst, axis=1) < thr
+        np.testing.assert_array_equal(inl, ref)
+        np.testing.assert_allclose(R, Rb, atol=1e-9)
+        np.testing.assert_allclose(t, tb, atol=1e-9)
+
+
 # ---------------------------------------------------------------- symmetric targets
 def _instance(rng):
     R = Rotation.random(random_state=int(rng.integers(1 << 30))).as_matrix()

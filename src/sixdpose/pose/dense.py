@@ -342,11 +342,18 @@ def ransac_kabsch(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None =
     p = w / w.sum()
     idx = rng.choice(K, size=(iterations, 3), p=p)  # a triplet with a repeated point scores low: no need to redraw
     Rs, ts = kabsch_batch(src[idx], dst[idx])
-    res = np.linalg.norm(src @ Rs.transpose(0, 2, 1) + ts[:, None] - dst[None], axis=2)  # (M, K)
-    score = ((res < threshold) * w[None]).sum(axis=1)
+    # |R s + t - d|^2 = |s|^2 + |d|^2 + |t|^2 - 2 d.t + 2 s.(R^T t) - 2 d.(R s) (R keeps lengths): every
+    # hypothesis against every correspondence in three small matrix products, (K, M), no (K, M, 3) array
+    M = len(Rs)
+    sq = ((src * src).sum(1) + (dst * dst).sum(1))[:, None] + (ts * ts).sum(1)[None]
+    sq += 2.0 * (src @ np.einsum("mji,mj->im", Rs, ts) - dst @ ts.T)
+    # (a contiguous right operand: OpenBLAS takes milliseconds on the transposed view of this shape)
+    sq -= 2.0 * (dst[:, :, None] * src[:, None, :]).reshape(K, 9) @ np.ascontiguousarray(Rs.reshape(M, 9).T)
+    inside = sq < threshold * threshold  # (K, M): |R src + t - dst| < threshold
+    score = w @ inside
     best = int(np.argmax(score))
     R, t = Rs[best], ts[best]
-    inl = res[best] < threshold
+    inl = inside[:, best]
     for _ in range(refits):
         if inl.sum() < 3:
             break
