@@ -233,34 +233,30 @@ def end_to_end_fps(seg, pose, refiner, data, device, frames: int, untrained: boo
     samples = [reader.load(k, masks=untrained) for k in reader.keys()[: frames + 1]]  # disk reads not timed
     est = Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device),
                     reader=reader)  # scores >= 0.5, as predict-pose; the reader for flips named by colour
-    if untrained:
+    if untrained:  # one network per detection count, each returning exactly that many
         segms = {n: Segmenter(seg, device=str(device), score_thresh=0.0, overrides={"detections_per_img": n})
                  for n in {max(len(s.instances), 1) for s in samples}}
 
-        def run_gt(sample):
+        def run(sample):
             out = segms[max(len(sample.instances), 1)].predict([sample.rgb])[0]
             return est.predict(sample), len(out["labels"])
+    else:
+        segm = Segmenter(seg, device=str(device))
 
-        run_gt(samples[0])  # warm-up
-        n_det = []
-        times = timed(lambda s: n_det.append(run_gt(s)[1]), samples[1:], device)
-        return {"e2e_fps": 1.0 / float(np.mean(times)), "e2e_ms_per_frame": 1000 * float(np.mean(times)),
-                "e2e_detections_per_frame": sum(n_det) / max(len(times), 1), "e2e_frames": len(times),
-                "e2e_segmentation": "untrained, detections fixed to the frame's objects; pose on GT masks"}
-    segm = Segmenter(seg, device=str(device))
-
-    def run(sample):
-        out = segm.predict([sample.rgb])[0]
-        found = zip(out["labels"], out["scores"], out["masks"], strict=True)
-        dets = [Detection(int(o), float(s), m) for o, s, m in found]
-        return est.predict(sample, dets), len(dets)
+        def run(sample):
+            out = segm.predict([sample.rgb])[0]
+            found = zip(out["labels"], out["scores"], out["masks"], strict=True)
+            dets = [Detection(int(o), float(s), m) for o, s, m in found]
+            return est.predict(sample, dets), len(dets)
 
     run(samples[0])  # warm-up
     n_det = []
     times = timed(lambda s: n_det.append(run(s)[1]), samples[1:], device)
-    n_det = sum(n_det)
-    return {"e2e_fps": 1.0 / float(np.mean(times)), "e2e_ms_per_frame": 1000 * float(np.mean(times)),
-            "e2e_detections_per_frame": n_det / max(len(times), 1), "e2e_frames": len(times)}
+    res = {"e2e_fps": 1.0 / float(np.mean(times)), "e2e_ms_per_frame": 1000 * float(np.mean(times)),
+           "e2e_detections_per_frame": sum(n_det) / max(len(times), 1), "e2e_frames": len(times)}
+    if untrained:
+        res["e2e_segmentation"] = "untrained, detections fixed to the frame's objects; pose on GT masks"
+    return res
 
 
 def main(argv=None) -> int:

@@ -283,12 +283,12 @@ class Augment:
         from scipy import ndimage
 
         mask = np.asarray(mask, dtype=bool)
-        v, u = np.nonzero(mask)
-        if not len(v):
+        box = mask_box(mask)
+        if box is None:
             return mask
         H, W = mask.shape
         p = self.mask_px + 1
-        r0, r1, c0, c1 = max(v.min() - p, 0), min(v.max() + 1 + p, H), max(u.min() - p, 0), min(u.max() + 1 + p, W)
+        r0, r1, c0, c1 = max(box[0] - p, 0), min(box[1] + p, H), max(box[2] - p, 0), min(box[3] + p, W)
         sub = mask[r0:r1, c0:c1]
         k = int(rng.integers(-self.mask_px, self.mask_px + 1)) if self.mask_px else 0
         if k > 0:

@@ -33,6 +33,7 @@ import numpy as np
 import torch
 
 from ..datasets.base import DatasetError, Sample
+from ..datasets.geometry import mask_box
 from ..datasets.readers import open_dataset
 from .config import SegConfig
 
@@ -318,9 +319,10 @@ def sample_to_target(sample: Sample, classes: ClassMap, min_pixels: int) -> tupl
         masks = np.stack([k.mask for k in keep]).astype(np.uint8)
         boxes = np.zeros((len(keep), 4), np.float32)
         for j, m in enumerate(masks):
-            ys = np.flatnonzero(m.any(axis=1))
-            xs = np.flatnonzero(m.any(axis=0))
-            boxes[j] = (xs[0], ys[0], xs[-1] + 1, ys[-1] + 1)
+            box = mask_box(m)
+            assert box is not None  # the kept instances have pixels (usable_instances)
+            v0, v1, u0, u1 = box
+            boxes[j] = (u0, v0, u1, v1)
     else:
         masks = np.zeros((0, H, W), np.uint8)
         boxes = np.zeros((0, 4), np.float32)

@@ -35,6 +35,7 @@ from ..artifacts.predictions import (
 )
 from ..artifacts.tables import tex_escape
 from ..datasets.base import DatasetError
+from ..datasets.geometry import mask_box
 from ..datasets.readers import open_dataset
 from ..errors import OutputError
 from ..fileio import atomic_write_text, claim_output_file
@@ -80,15 +81,16 @@ def coco_ground_truth(samples, classes: ClassMap) -> tuple[dict, dict]:
             if npix == 0:
                 stats["empty_masks"] += 1
                 continue
-            ys = np.flatnonzero(inst.mask.any(axis=1))
-            xs = np.flatnonzero(inst.mask.any(axis=0))
+            box = mask_box(inst.mask)
+            assert box is not None  # npix > 0
+            v0, v1, u0, u1 = box
             anns.append({
                 "id": len(anns) + 1,
                 "image_id": iid,
                 "category_id": int(inst.obj_id),
                 "segmentation": encode_rle(inst.mask),
                 "area": float(npix),
-                "bbox": [float(xs[0]), float(ys[0]), float(xs[-1] + 1 - xs[0]), float(ys[-1] + 1 - ys[0])],
+                "bbox": [float(u0), float(v0), float(u1 - u0), float(v1 - v0)],
                 "iscrowd": 0,
             })
             stats["instances"] += 1
@@ -235,12 +237,9 @@ def evaluate(data: str | Path, pred_dir: str | Path, out_dir: str | Path | None 
         for s, i in wanted:
             for d in read_predictions(pred_dir, s, i):
                 m, lab, sc = d.mask, d.obj_id, d.score
-                ys, xs = np.flatnonzero(m.any(1)), np.flatnonzero(m.any(0))
-                bbox = (
-                    [float(xs[0]), float(ys[0]), float(xs[-1] + 1 - xs[0]), float(ys[-1] + 1 - ys[0])]
-                    if xs.size
-                    else [0.0] * 4
-                )
+                box = mask_box(m)
+                v0, v1, u0, u1 = box if box is not None else (0, 0, 0, 0)  # an empty mask: a 0 x 0 box at 0
+                bbox = [float(u0), float(v0), float(u1 - u0), float(v1 - v0)]
                 results.append({"image_id": coco_image_id(s, i), "category_id": int(lab),
                                 "segmentation": encode_rle(m), "bbox": bbox, "score": float(sc)})
     metrics = coco_evaluate(gt, results, classes)
