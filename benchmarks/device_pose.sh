@@ -22,7 +22,13 @@ case "${1:-}" in
     [ -d "$sample/train_real/000000" ] || { echo "device_pose.sh: $sample/train_real/000000 missing" >&2; exit 2; }
     mkdir -p .git/info
     for d in /.gpu/ /.whl/; do grep -qxF "$d" .git/info/exclude 2>/dev/null || echo "$d" >> .git/info/exclude; done
+    # .gpu/ is this script's own (its marker file); a .gpu/ it did not make is left alone
+    if [ -e .gpu ] && [ ! -f .gpu/.made-by-device_pose ]; then
+      echo "device_pose.sh: .gpu exists and was not made by this script (no .gpu/.made-by-device_pose); move it away" >&2
+      exit 2
+    fi
     rm -rf .gpu && mkdir -p .gpu/ycbv_sample/train_real .gpu/runs/pose_ycbv_dense
+    echo "made by benchmarks/device_pose.sh prepare; removed and remade by it" > .gpu/.made-by-device_pose
     cp -r "$sample/models" "$sample/README.md" .gpu/ycbv_sample/
     cp -r "$sample/train_real/000000" .gpu/ycbv_sample/train_real/
     cp "$run"/{model.pt,config.json,run.json} .gpu/runs/pose_ycbv_dense/

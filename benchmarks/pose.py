@@ -93,13 +93,11 @@ def fake_runs(profile: str, tmp: Path, classes: int = 21, head: str = "paper", a
     """Untrained pose and refiner checkpoints of a profile (for timing only; no refiner for the dense head)."""
     cfg, rcfg = profile_config(profile, {"head": head, "appearance": appearance}), refiner_profile_config(profile)
     cls = [[i + 1, f"obj{i + 1}", False] for i in range(classes)]
+    torch.manual_seed(0)  # the same untrained weights every run
     net, ref = build_posenet(cfg, classes), build_refiner(rcfg, classes, cfg.emb_dim)
-    base = {"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "classes": cls, "epoch": 0, "global_step": 0,
-            "elapsed": 0.0}
-    save_checkpoint(dict(base, kind="pose", config=cfg.to_dict(), arch=cfg.arch(), model=net.state_dict()),
-                    tmp / "pose.pt")
-    save_checkpoint(dict(base, kind="refiner", config=rcfg.to_dict(), arch=rcfg.arch(), model=ref.state_dict(),
-                        pose={"classes": cls, "arch": cfg.arch(), "run": str(tmp / "pose.pt")}), tmp / "ref.pt")
+    save_checkpoint(ck.weights("pose", cfg, cls, net.state_dict()), tmp / "pose.pt")
+    pose = {"classes": cls, "arch": cfg.arch(), "run": str(tmp / "pose.pt")}
+    save_checkpoint(ck.weights("refiner", rcfg, cls, ref.state_dict(), pose=pose), tmp / "ref.pt")
     return tmp / "pose.pt", (tmp / "ref.pt" if head == "paper" else None)
 
 
@@ -212,10 +210,9 @@ def untrained_seg(profile: str, pose, tmp: Path) -> Path:
 
     cfg = seg_profile_config(profile, pretrained=False)
     classes = [[int(c[0]), str(c[1])] for c in ck.load(pose, kind="pose")["classes"]]
+    torch.manual_seed(0)  # the same untrained weights every run
     model, init = build_model(cfg, len(classes), verbose=False)
-    save_checkpoint({"format": seg_ck.FORMAT, "version": seg_ck.CHECKPOINT_VERSION, "config": cfg.to_dict(),
-                     "classes": classes, "init": init, "epoch": 0, "global_step": 0, "elapsed": 0.0,
-                     "model": model.state_dict()}, tmp / "seg.pt")
+    save_checkpoint(seg_ck.weights(cfg, classes, init, model.state_dict()), tmp / "seg.pt")
     return tmp / "seg.pt"
 
 

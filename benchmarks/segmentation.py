@@ -90,8 +90,7 @@ def untrained_checkpoint(profile: str, ds, path: Path, seed: int = 0) -> tuple[P
     classes = ClassMap.from_dataset(ds)
     torch.manual_seed(seed)
     model, init = build_model(cfg, len(classes))
-    save_checkpoint({"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "config": cfg.to_dict(),
-                     "classes": classes.to_list(), "init": init, "epoch": 0, "model": model.state_dict()}, path)
+    save_checkpoint(ck.weights(cfg, classes.to_list(), init, model.state_dict()), path)
     return path, f"untrained {profile} model ({cfg.backbone}, {len(classes)} classes, random weights)"
 
 

@@ -72,18 +72,7 @@ def fake_pose_run(path: Path, cfg: PoseConfig, classes=((OID, "035_power_drill",
     net = build_posenet(cfg, len(classes))
     path.mkdir(parents=True, exist_ok=True)
     save_checkpoint(
-        {
-            "format": ck.FORMAT,
-            "version": ck.CHECKPOINT_VERSION,
-            "kind": "pose",
-            "config": cfg.to_dict(),
-            "arch": cfg.arch(),
-            "classes": [list(c) for c in classes],
-            "epoch": 1,
-            "global_step": 0,
-            "elapsed": 0.0,
-            "model": net.state_dict(),
-        },
+        ck.weights("pose", cfg, [list(c) for c in classes], net.state_dict(), epoch=1),
         path / ck.FINAL,
     )
     return path
@@ -372,6 +361,26 @@ def test_corrupt_checkpoint_one_line_exit_2(pose_ds, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "corrupt" in err and "model.pt" in err
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_checkpoint_helpers_write_what_load_and_the_refiner_check_accept(tmp_path):
+    from sixdpose.pose.config import refiner_profile_config
+    from sixdpose.pose.model import build_refiner
+
+    cfg, rcfg = profile_config("smoke"), refiner_profile_config("smoke")
+    cls = [[OID, "035_power_drill", False]]
+    run = fake_pose_run(tmp_path / "p", cfg, classes=[tuple(c) for c in cls])
+    pose = ck.load(run, kind="pose")
+    assert pose["classes"] == cls and pose["epoch"] == 1 and pose["arch"] == cfg.arch()
+    ref = build_refiner(rcfg, 1, cfg.emb_dim)
+    link = {"classes": pose["classes"], "arch": pose["arch"], "run": pose["path"]}
+    save_checkpoint(ck.weights("refiner", rcfg, cls, ref.state_dict(), pose=link), tmp_path / "ref.pt")
+    refiner = ck.load(tmp_path / "ref.pt", kind="refiner")
+    ck.check_refiner_matches(refiner, pose)  # no error: the link names this pose run
+    with pytest.raises(ValueError, match="refiner checkpoint needs"):
+        ck.header("refiner", rcfg, cls)
+    with pytest.raises(ValueError, match="kind must be"):
+        ck.header("seg", cfg, cls)
 
 
 def test_cli_refuses_foreign_output(pose_ds, tmp_path, capsys):

@@ -33,8 +33,7 @@ def make_run(run: Path, classes: ClassMap, **cfg_changes) -> Path:
     run.mkdir(parents=True, exist_ok=True)
     cfg.save(run / "config.json")
     save_checkpoint(
-        {"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "config": cfg.to_dict(),
-         "classes": classes.to_list(), "init": init, "epoch": 0, "model": model.state_dict()},
+        ck.weights(cfg, classes.to_list(), init, model.state_dict()),
         run / ck.FINAL,
     )
     return run

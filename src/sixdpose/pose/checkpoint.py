@@ -27,6 +27,31 @@ class CheckpointError(SixdposeError):
     """A pose checkpoint is missing, corrupt, or incompatible (other kind, classes or architecture)."""
 
 
+def header(kind: str, cfg, classes: list, pose: dict | None = None) -> dict:
+    """The fields every pose-stage checkpoint starts with: format, version, ``kind`` (``pose`` | ``refiner``),
+    ``config`` and ``arch`` (:class:`~sixdpose.pose.config.PoseConfig` or ``RefinerConfig``), ``classes``
+    ``[[obj_id, name, symmetric], ...]`` and, for a refiner, ``pose``: ``{"classes", "arch", "run"}`` of its
+    main network. The training task and the benchmarks' untrained checkpoints both use it."""
+    if kind not in ("pose", "refiner"):
+        raise ValueError(f"kind must be 'pose' or 'refiner', got {kind!r}")
+    if (kind == "refiner") != (pose is not None):
+        raise ValueError("a refiner checkpoint needs its main network's {'classes', 'arch', 'run'} (pose=), "
+                         "a pose checkpoint none")
+    d = {"format": FORMAT, "version": CHECKPOINT_VERSION, "kind": kind, "config": cfg.to_dict(), "arch": cfg.arch(),
+         "classes": [list(c) for c in classes]}
+    if pose is not None:
+        d["pose"] = {"classes": [list(c) for c in pose["classes"]], "arch": dict(pose["arch"]), "run": str(pose["run"])}
+    return d
+
+
+def weights(kind: str, cfg, classes: list, state_dict: dict, pose: dict | None = None, epoch: int = 0,
+            global_step: int = 0, elapsed: float = 0.0) -> dict:
+    """A complete ``model.pt`` checkpoint (:func:`header` plus weights and counters) for a network that was
+    not trained by the training task (an untrained one timed by the benchmarks)."""
+    return {**header(kind, cfg, classes, pose), "epoch": int(epoch), "global_step": int(global_step),
+            "elapsed": float(elapsed), "model": state_dict}
+
+
 def load(path: str | Path, kind: str | None = None) -> dict:
     """Read and validate a checkpoint (file or run directory) onto the CPU.
 

@@ -266,12 +266,11 @@ class PoseTask(TrainTask):
 
     def checkpoint_header(self, cfg):
         """Format, kind, config, architecture, classes (and the refiner's pose run)."""
-        d = {"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "kind": self.kind, "config": cfg.to_dict(),
-             "arch": cfg.arch(), "classes": self.classes}
+        pose = None
         if self.kind == "refiner":
             pc = self.pose_ckpt
-            d["pose"] = {"classes": pc["classes"], "arch": pc["arch"], "run": pc["path"]}
-        return d
+            pose = {"classes": pc["classes"], "arch": pc["arch"], "run": pc["path"]}
+        return ck.header(self.kind, cfg, self.classes, pose)
 
     def run_info(self):
         """Classes, data and masks (and the pose run of a refiner)."""

@@ -28,6 +28,22 @@ class CheckpointError(SixdposeError):
     """A checkpoint is missing, corrupt, or not compatible with this code or dataset."""
 
 
+def header(cfg, classes: list, init: str) -> dict:
+    """The fields every segmentation checkpoint starts with: format, version, ``config``
+    (:class:`~sixdpose.segmentation.config.SegConfig`), ``classes`` ``[[obj_id, name], ...]`` and ``init``
+    (``imagenet`` | ``random``). The training task and the benchmarks' untrained checkpoints both use it."""
+    return {"format": FORMAT, "version": CHECKPOINT_VERSION, "config": cfg.to_dict(),
+            "classes": [list(c) for c in classes], "init": init}
+
+
+def weights(cfg, classes: list, init: str, state_dict: dict, epoch: int = 0, global_step: int = 0,
+            elapsed: float = 0.0) -> dict:
+    """A complete ``model.pt`` checkpoint (:func:`header` plus weights and counters) for a network that was
+    not trained by :func:`~sixdpose.segmentation.train.train` (an untrained one timed by the benchmarks)."""
+    return {**header(cfg, classes, init), "epoch": int(epoch), "global_step": int(global_step),
+            "elapsed": float(elapsed), "model": state_dict}
+
+
 def load(path: str | Path) -> dict:
     """Read and validate a segmentation checkpoint (file or run directory) onto the CPU.
 

@@ -115,8 +115,7 @@ class SegTask(TrainTask):
 
     def checkpoint_header(self, cfg):
         """Format, config, classes and the backbone initialisation."""
-        return {"format": ck.FORMAT, "version": ck.CHECKPOINT_VERSION, "config": cfg.to_dict(),
-                "classes": self.classes.to_list(), "init": self.init}
+        return ck.header(cfg, self.classes.to_list(), self.init)
 
     def run_info(self):
         """Classes, initialisation, number of training images and the split policy."""
