@@ -139,8 +139,11 @@ LEARNED_CPU = [
     *((f"{label} (ours)", "GT", name, None) for label, name in DENSE_CPU),
     ("learned, 0 it.", "predicted (Mask R-CNN `cpu`)", "cpu/test_pred_learned_it0", None),
     ("learned + 2 it.", "predicted (Mask R-CNN `cpu`)", "cpu/test_pred_learned_it2", None),
+    *((f"{label} (ours)", "predicted (Mask R-CNN `cpu`)", name.replace("test_gt_", "test_pred_"), None)
+      for label, name in DENSE_CPU),
 ]
-_OPTIONAL_LEARNED_CPU = tuple(name for _, name in DENSE_CPU)
+_OPTIONAL_LEARNED_CPU = tuple(name for _, name in DENSE_CPU) + tuple(
+    name.replace("test_gt_", "test_pred_") for _, name in DENSE_CPU)
 
 
 def _learned_cpu_summary(src: Source) -> str:
