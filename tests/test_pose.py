@@ -72,7 +72,7 @@ def fake_pose_run(path: Path, cfg: PoseConfig, classes=((OID, "035_power_drill",
     net = build_posenet(cfg, len(classes))
     path.mkdir(parents=True, exist_ok=True)
     save_checkpoint(
-        ck.weights("pose", cfg, [list(c) for c in classes], net.state_dict(), epoch=1),
+        ck.weights("pose", cfg, classes, net.state_dict(), epoch=1),
         path / ck.FINAL,
     )
     return path

@@ -128,6 +128,8 @@ _T3 = TABLES["III"]
 #: The dense head's results on ``data/test`` (label, result): rows of :data:`LEARNED_CPU` and columns of the
 #: per-object block, shown only where their result exists.
 DENSE_CPU = (("dense head", "cpu/test_gt_dense"), ("dense head + ICP", "cpu/test_gt_dense_icp"))
+#: The same rows with the ``cpu`` Mask R-CNN's predicted masks.
+DENSE_CPU_PRED = tuple((label, name.replace("test_gt_", "test_pred_")) for label, name in DENSE_CPU)
 #: Learned-pose evaluations of the ``cpu`` runs on ``data/test``: (label, masks, result, method key of
 #: :data:`sixdpose.registry.METHODS` for the paper column). The dense head's rows (the project's own
 #: method) are shown where their result files exist.
@@ -139,11 +141,9 @@ LEARNED_CPU = [
     *((f"{label} (ours)", "GT", name, None) for label, name in DENSE_CPU),
     ("learned, 0 it.", "predicted (Mask R-CNN `cpu`)", "cpu/test_pred_learned_it0", None),
     ("learned + 2 it.", "predicted (Mask R-CNN `cpu`)", "cpu/test_pred_learned_it2", None),
-    *((f"{label} (ours)", "predicted (Mask R-CNN `cpu`)", name.replace("test_gt_", "test_pred_"), None)
-      for label, name in DENSE_CPU),
+    *((f"{label} (ours)", "predicted (Mask R-CNN `cpu`)", name, None) for label, name in DENSE_CPU_PRED),
 ]
-_OPTIONAL_LEARNED_CPU = tuple(name for _, name in DENSE_CPU) + tuple(
-    name.replace("test_gt_", "test_pred_") for _, name in DENSE_CPU)
+_OPTIONAL_LEARNED_CPU = tuple(name for _, name in (*DENSE_CPU, *DENSE_CPU_PRED))
 
 
 def _learned_cpu_summary(src: Source) -> str:
