@@ -95,9 +95,10 @@ def fake_runs(profile: str, tmp: Path, classes: int = 21, head: str = "paper", a
     cls = [[i + 1, f"obj{i + 1}", False] for i in range(classes)]
     torch.manual_seed(0)  # the same untrained weights every run
     net, ref = build_posenet(cfg, classes), build_refiner(rcfg, classes, cfg.emb_dim)
-    save_checkpoint(ck.weights("pose", cfg, cls, net.state_dict()), tmp / "pose.pt")
-    pose = {"classes": cls, "arch": cfg.arch(), "run": str(tmp / "pose.pt")}
-    save_checkpoint(ck.weights("refiner", rcfg, cls, ref.state_dict(), pose=pose), tmp / "ref.pt")
+    pose = ck.weights("pose", cfg, cls, net.state_dict())
+    save_checkpoint(pose, tmp / "pose.pt")
+    save_checkpoint(ck.weights("refiner", rcfg, cls, ref.state_dict(), pose=ck.pose_link(pose, tmp / "pose.pt")),
+                    tmp / "ref.pt")
     return tmp / "pose.pt", (tmp / "ref.pt" if head == "paper" else None)
 
 

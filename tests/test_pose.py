@@ -373,10 +373,14 @@ def test_checkpoint_helpers_write_what_load_and_the_refiner_check_accept(tmp_pat
     pose = ck.load(run, kind="pose")
     assert pose["classes"] == cls and pose["epoch"] == 1 and pose["arch"] == cfg.arch()
     ref = build_refiner(rcfg, 1, cfg.emb_dim)
-    link = {"classes": pose["classes"], "arch": pose["arch"], "run": pose["path"]}
+    link = ck.pose_link(pose)
+    assert link == {"classes": cls, "arch": cfg.arch(), "run": str(run / ck.FINAL)}
     save_checkpoint(ck.weights("refiner", rcfg, cls, ref.state_dict(), pose=link), tmp_path / "ref.pt")
     refiner = ck.load(tmp_path / "ref.pt", kind="refiner")
+    assert refiner["pose"] == link
     ck.check_refiner_matches(refiner, pose)  # no error: the link names this pose run
+    with pytest.raises(ValueError, match="pass run="):
+        ck.pose_link({"classes": cls, "arch": cfg.arch()})
     with pytest.raises(ValueError, match="refiner checkpoint needs"):
         ck.header("refiner", rcfg, cls)
     with pytest.raises(ValueError, match="kind must be"):

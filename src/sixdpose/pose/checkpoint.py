@@ -27,20 +27,29 @@ class CheckpointError(SixdposeError):
     """A pose checkpoint is missing, corrupt, or incompatible (other kind, classes or architecture)."""
 
 
+def pose_link(pose: dict, run: str | Path | None = None) -> dict:
+    """A refiner's link to the main network it was trained on: ``{"classes", "arch", "run"}`` of the pose
+    checkpoint ``pose`` (as :func:`load` returns it, whose ``path`` is the run; or as :func:`weights` builds it,
+    with ``run`` the file it was saved to). :func:`check_refiner_matches` compares a refiner against it."""
+    where = run if run is not None else pose.get("path")
+    if where is None:
+        raise ValueError("pose_link: the pose checkpoint has no 'path'; pass run= (the file it was saved to)")
+    return {"classes": [list(c) for c in pose["classes"]], "arch": dict(pose["arch"]), "run": str(where)}
+
+
 def header(kind: str, cfg, classes: list, pose: dict | None = None) -> dict:
     """The fields every pose-stage checkpoint starts with: format, version, ``kind`` (``pose`` | ``refiner``),
     ``config`` and ``arch`` (:class:`~sixdpose.pose.config.PoseConfig` or ``RefinerConfig``), ``classes``
-    ``[[obj_id, name, symmetric], ...]`` and, for a refiner, ``pose``: ``{"classes", "arch", "run"}`` of its
-    main network. The training task and the benchmarks' untrained checkpoints both use it."""
+    ``[[obj_id, name, symmetric], ...]`` and, for a refiner, ``pose``: its main network's :func:`pose_link`.
+    The training task and the benchmarks' untrained checkpoints both use it."""
     if kind not in ("pose", "refiner"):
         raise ValueError(f"kind must be 'pose' or 'refiner', got {kind!r}")
     if (kind == "refiner") != (pose is not None):
-        raise ValueError("a refiner checkpoint needs its main network's {'classes', 'arch', 'run'} (pose=), "
-                         "a pose checkpoint none")
+        raise ValueError("a refiner checkpoint needs its main network's pose_link (pose=), a pose checkpoint none")
     d = {"format": FORMAT, "version": CHECKPOINT_VERSION, "kind": kind, "config": cfg.to_dict(), "arch": cfg.arch(),
          "classes": [list(c) for c in classes]}
     if pose is not None:
-        d["pose"] = {"classes": [list(c) for c in pose["classes"]], "arch": dict(pose["arch"]), "run": str(pose["run"])}
+        d["pose"] = pose_link(pose, pose["run"])
     return d
 
 

@@ -266,10 +266,7 @@ class PoseTask(TrainTask):
 
     def checkpoint_header(self, cfg):
         """Format, kind, config, architecture, classes (and the refiner's pose run)."""
-        pose = None
-        if self.kind == "refiner":
-            pc = self.pose_ckpt
-            pose = {"classes": pc["classes"], "arch": pc["arch"], "run": pc["path"]}
+        pose = ck.pose_link(self.pose_ckpt) if self.kind == "refiner" else None
         return ck.header(self.kind, cfg, self.classes, pose)
 
     def run_info(self):
