@@ -349,3 +349,24 @@ def test_the_val_chosen_verify_settings_read_back_as_the_command_line_gives_them
     cfg = dataclasses.replace(PRESETS["default"], **fields)
     cfg.validate()
     assert cfg.verify_near_symmetries == 6 and cfg.verify_recentre is True
+
+
+def test_slides_along_the_longest_axis_place_a_half_hidden_box_by_its_silhouette():
+    import dataclasses
+
+    surf = surface(coloured=False)
+    S = H.slides(surf, 2, 0.1)
+    # four translations along the box's 10 cm axis (x): +-1 and +-2 cm
+    assert S.shape == (4, 4, 4) and np.allclose(S[:, :3, :3], np.eye(3))
+    assert np.allclose(np.sort(np.abs(S[:, 0, 3])), [0.01, 0.01, 0.02, 0.02], atol=5e-4)
+    assert np.allclose(S[:, 1:3, 3], 0, atol=1e-5)
+    X_true = X(R_TRUE)
+    frame = render(X_true, occluder=0.3)  # the image's left half of the box hidden
+    off = X_true @ X(None, (-0.02, 0, 0))  # slid 2 cm along its long axis
+    cfg = dataclasses.replace(CFG, verify_turns=0, verify_slides=2, verify_slide_rel=0.1)
+    v = H.verify_hypotheses(off, surf, frame, cfg, obj_id=1)
+    assert v.n_hypotheses == 1 + 4 and v.index != 0
+    assert np.allclose(v.X_CO, X_true, atol=1e-3)
+    # off: the slid input pose is all there is
+    v0 = H.verify_hypotheses(off, surf, frame, dataclasses.replace(cfg, verify_slides=0), obj_id=1)
+    assert v0.n_hypotheses == 1 and np.allclose(v0.X_CO, off)

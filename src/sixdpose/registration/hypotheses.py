@@ -4,7 +4,8 @@ Global registration, ICP and the colour search each give one pose; on real frame
 fits the masked cloud as well as the right one (a turn about a near-symmetric axis that only the
 texture decides, a flip of a partly occluded object). :func:`verify_hypotheses` keeps several
 hypotheses per instance (the input pose, the colour search's other basins, the global method's, and
-their turns about the model's principal axes through its centroid), scores each against the frame
+their turns about the model's principal axes through its centroid, optionally each slid along the
+model's longest axis), scores each against the frame
 without rendering but with occlusion reasoning, ICPs the best few and keeps the highest score.
 
 Scoring (:func:`score_hypotheses`), batched over hypotheses: the model's surface samples with normals
@@ -199,6 +200,22 @@ def turns(surface: Surface, n_turns: int) -> np.ndarray:
             S = Rotation.from_rotvec(surface.axes[:, a] * (2 * math.pi * k / n_turns)).as_matrix()
             out.append(X_from(S, c - S @ c))
     return np.stack(out)
+
+
+def slides(surface: Surface, n_slides: int, step_rel: float) -> np.ndarray:
+    """Rigid motions ``X_ON`` (2 * n_slides, 4, 4) of the object frame: translations by ``k * step_rel`` x
+    the samples' extent along the longest principal axis, along that axis, ``k = +-1 .. +-n_slides``
+    (the identity is not included)."""
+    a = surface.axes[:, 0]
+    proj = (surface.points - surface.centroid) @ a
+    step = step_rel * float(proj.max() - proj.min())
+    out = []
+    for k in range(1, n_slides + 1):
+        for sgn in (1.0, -1.0):
+            X = np.eye(4)
+            X[:3, 3] = sgn * k * step * a
+            out.append(X)
+    return np.stack(out) if out else np.zeros((0, 4, 4))
 
 
 def _half_turn_axes(n: int) -> np.ndarray:
@@ -698,6 +715,9 @@ def verify_hypotheses(
     if cfg.verify_near_symmetries > 0:
         T = np.concatenate([T, near_symmetries(surface, keep=cfg.verify_near_symmetries)])
     Xs = np.einsum("bij,tjk->btik", np.stack(bases), T).reshape(-1, 4, 4)
+    if cfg.verify_slides > 0:  # after the input pose (index 0 stays the input)
+        S = slides(surface, cfg.verify_slides, cfg.verify_slide_rel)
+        Xs = np.concatenate([Xs, np.einsum("hij,sjk->hsik", Xs, S).reshape(-1, 4, 4)])
     if cfg.verify_recentre:
         Xs = np.concatenate([Xs, recentred(Xs[1:], surface, frame)])
     sc = score_hypotheses(Xs, surface, frame, cfg)

@@ -166,6 +166,11 @@ class RegistrationConfig(Config):
             grey minus its local mean over ``verify_detail_rel`` x the diameter, against the frame's
             grey minus its local mean inside the mask: printing and logos, which chromaticity misses
             on a white and black label, without the shading that misleads the plain grey NCC).
+            verify_slides, verify_slide_rel: also score every hypothesis slid along the model's longest
+            principal axis by ``k x verify_slide_rel`` x the model's extent along it, ``k = +-1 ..
+            +-verify_slides`` (0: none; :func:`~sixdpose.registration.hypotheses.slides`): an elongated
+            object whose visible part fits its middle as well as its end (a bottle's body hidden behind
+            another object) is placed by the silhouette and the depth in front of it.
             verify_search_rounds, verify_search_n, verify_search_deg: local search of the best
             ``verify_icp`` hypotheses before ICP (:func:`~sixdpose.registration.hypotheses.local_search`;
             0 rounds: none). verify_retry_below, verify_retries: an instance whose verified score stays
@@ -240,6 +245,8 @@ class RegistrationConfig(Config):
     verify_near_symmetries: int = bounded(0, min=0, max=100)
     verify_detail_share: float = bounded(0.0, min=0, max=1)
     verify_detail_rel: float = bounded(0.05, min=0, max=1)
+    verify_slides: int = bounded(0, min=0, max=20)
+    verify_slide_rel: float = bounded(0.1, min=0, max=1, min_open=True)
     verify_search_rounds: int = bounded(0, min=0, max=100)
     verify_search_n: int = bounded(32, min=1, max=100_000)
     verify_search_deg: float = bounded(30.0, min=0, max=180, min_open=True)
