@@ -360,6 +360,8 @@ def test_slides_along_the_longest_axis_place_a_half_hidden_box_by_its_silhouette
     assert S.shape == (4, 4, 4) and np.allclose(S[:, :3, :3], np.eye(3))
     assert np.allclose(np.sort(np.abs(S[:, 0, 3])), [0.01, 0.01, 0.02, 0.02], atol=5e-4)
     assert np.allclose(S[:, 1:3, 3], 0, atol=1e-5)
+    # the box is 10/6 = 1.67 times as long along x as along y: elongated for 1.5, not for 2
+    assert len(H.slides(surf, 2, 0.1, min_elong=1.5)) == 4 and len(H.slides(surf, 2, 0.1, min_elong=2.0)) == 0
     X_true = X(R_TRUE)
     frame = render(X_true, occluder=0.3)  # the image's left half of the box hidden
     off = X_true @ X(None, (-0.02, 0, 0))  # slid 2 cm along its long axis

@@ -619,6 +619,24 @@ def test_onboarding_is_timed_apart_from_the_frames(pose_ds, tmp_path):
     assert est.settings()["onboarding_s"] == round(first, 3)
 
 
+def test_the_learned_stage_verifies_with_its_slides_and_a_set_wins(pose_ds, tmp_path):
+    """predict-pose --verify starts from the default preset with LEARNED_VERIFY (slides along an elongated
+    model's axis), records them beside the results, and a ``--set`` of the same field wins."""
+    from sixdpose.datasets import as_reader
+    from sixdpose.pose.infer import Estimator
+    from sixdpose.registration import LEARNED_VERIFY
+
+    run = fake_pose_run(tmp_path / "p", profile_config("smoke"))
+    reader = as_reader(pose_ds)
+    assert LEARNED_VERIFY["verify_slides"] > 0
+    est = Estimator(run, device="cpu", icp=True, verify=True, reader=reader, fallback="ransac")
+    for k, v in LEARNED_VERIFY.items():
+        assert getattr(est.reg_cfg, k) == v and getattr(est.fallback_cfg, k) == v
+        assert est.settings()["verify_config"][k] == v
+    off = Estimator(run, device="cpu", icp=True, verify=True, reader=reader, overrides={"verify_slides": 0})
+    assert off.reg_cfg.verify_slides == 0 and off.settings()["verify_config"]["verify_slides"] == 0
+
+
 def test_fallback_registers_the_poorly_verified_instances(pose_ds, tmp_path):
     """predict-pose --verify --fallback ransac: an instance whose verified learned pose scores below
     verify_retry_below is registered by RANSAC too and the better-verified pose is kept; at threshold 0 none

@@ -143,7 +143,8 @@ class Estimator:
         score_thresh: predicted masks below this score are ignored. seed: point-sampling seed.
         max_batch: most instances per forward pass (crop mode).
         overrides: :data:`INFERENCE_FIELDS` of the pose run's config, and ``verify_*`` fields of the
-            registration config (with ``verify``), to change (``predict-pose --set``).
+            registration config (with ``verify``), to change (``predict-pose --set``); the verification
+            starts from the ``default`` preset with :data:`~sixdpose.registration.LEARNED_VERIFY`.
         fallback: ``None``, or a global method of the hybrid stage (``"ransac"``, ``"fgr"``,
             ``"super4pcs"``) for the instances whose verified learned pose scores below the
             registration config's ``verify_retry_below`` (the threshold below which ``register``
@@ -244,9 +245,9 @@ class Estimator:
 
             warmup_colour()
         if icp or colour_verify or verify or self.colour_flips:
-            from ..registration import ReferenceCache, get_preset
+            from ..registration import LEARNED_VERIFY, ReferenceCache, get_preset
 
-            self.reg_cfg = get_preset("default", verify=verify, **(reg_overrides or {}))
+            self.reg_cfg = get_preset("default", verify=verify, **{**LEARNED_VERIFY, **(reg_overrides or {})})
             self._cache = ReferenceCache(reader)
 
     def settings(self) -> dict:
@@ -270,7 +271,7 @@ class Estimator:
     def _setup_fallback(self, fallback: str | None, profile: str, reg_overrides: dict | None) -> None:
         """The hybrid fallback of the constructor's ``fallback`` (see the class docstring); raises
         :class:`~sixdpose.pose.data.PoseError` for an unknown method or profile or without ``verify``."""
-        from ..registration import METHODS, PRESETS, get_preset
+        from ..registration import LEARNED_VERIFY, METHODS, PRESETS, get_preset
 
         self.fallback, self.fallback_profile, self.fallback_cfg = fallback, profile, None
         self.fallback_tried = self.fallback_won = 0
@@ -283,7 +284,7 @@ class Estimator:
                             f"got {profile!r}")
         if not self.verify:
             raise PoseError("--fallback needs --verify (the fallback runs where the verified score is low)")
-        self.fallback_cfg = get_preset(profile, verify=True, **(reg_overrides or {}))
+        self.fallback_cfg = get_preset(profile, verify=True, **{**LEARNED_VERIFY, **(reg_overrides or {})})
         if self.fallback_cfg.colour_verify:
             from ..registration import warmup_colour
 

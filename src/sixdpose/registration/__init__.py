@@ -15,11 +15,12 @@ from .methods import (
     register_ransac,
     register_super4pcs,
 )
-from .presets import PRESETS, RegistrationConfig, get_preset
+from .presets import LEARNED_VERIFY, PRESETS, RegistrationConfig, get_preset
 from .runner import RegistrationError, instance_seed, run_registration
 
 __all__ = [
-    "METHODS", "PRESETS", "Frame", "ReferenceCache", "Registration", "RegistrationConfig", "RegistrationError",
+    "LEARNED_VERIFY", "METHODS", "PRESETS", "Frame", "ReferenceCache", "Registration", "RegistrationConfig",
+    "RegistrationError",
     "estimate_pose", "get_preset", "instance_seed", "kabsch_batch", "prepare_scene", "refine_icp", "refine_pose",
     "register_fgr", "register_ransac", "register_super4pcs", "run_registration", "verify_hypotheses", "colour_scores",
     "warmup_colour",

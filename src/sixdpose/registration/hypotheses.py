@@ -202,13 +202,17 @@ def turns(surface: Surface, n_turns: int) -> np.ndarray:
     return np.stack(out)
 
 
-def slides(surface: Surface, n_slides: int, step_rel: float) -> np.ndarray:
+def slides(surface: Surface, n_slides: int, step_rel: float, min_elong: float = 0.0) -> np.ndarray:
     """Rigid motions ``X_ON`` (2 * n_slides, 4, 4) of the object frame: translations by ``k * step_rel`` x
     the samples' extent along the longest principal axis, along that axis, ``k = +-1 .. +-n_slides``
-    (the identity is not included)."""
+    (the identity is not included). None (shape (0, 4, 4)) when the model's extent along that axis is less
+    than ``min_elong`` times its extent along the second axis (a model not elongated)."""
+    proj = (surface.points - surface.centroid) @ surface.axes[:, :2]
+    extent = proj.max(axis=0) - proj.min(axis=0)
+    if extent[0] < min_elong * extent[1]:
+        return np.zeros((0, 4, 4))
     a = surface.axes[:, 0]
-    proj = (surface.points - surface.centroid) @ a
-    step = step_rel * float(proj.max() - proj.min())
+    step = step_rel * float(extent[0])
     out = []
     for k in range(1, n_slides + 1):
         for sgn in (1.0, -1.0):
@@ -716,7 +720,7 @@ def verify_hypotheses(
         T = np.concatenate([T, near_symmetries(surface, keep=cfg.verify_near_symmetries)])
     Xs = np.einsum("bij,tjk->btik", np.stack(bases), T).reshape(-1, 4, 4)
     if cfg.verify_slides > 0:  # after the input pose (index 0 stays the input)
-        S = slides(surface, cfg.verify_slides, cfg.verify_slide_rel)
+        S = slides(surface, cfg.verify_slides, cfg.verify_slide_rel, cfg.verify_slide_min_elong)
         Xs = np.concatenate([Xs, np.einsum("hij,sjk->hsik", Xs, S).reshape(-1, 4, 4)])
     if cfg.verify_recentre:
         Xs = np.concatenate([Xs, recentred(Xs[1:], surface, frame)])

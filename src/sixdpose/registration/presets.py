@@ -166,9 +166,10 @@ class RegistrationConfig(Config):
             grey minus its local mean over ``verify_detail_rel`` x the diameter, against the frame's
             grey minus its local mean inside the mask: printing and logos, which chromaticity misses
             on a white and black label, without the shading that misleads the plain grey NCC).
-            verify_slides, verify_slide_rel: also score every hypothesis slid along the model's longest
-            principal axis by ``k x verify_slide_rel`` x the model's extent along it, ``k = +-1 ..
-            +-verify_slides`` (0: none; :func:`~sixdpose.registration.hypotheses.slides`): an elongated
+            verify_slides, verify_slide_rel, verify_slide_min_elong: also score every hypothesis slid along
+            the model's longest principal axis by ``k x verify_slide_rel`` x the model's extent along it,
+            ``k = +-1 .. +-verify_slides`` (0: none; :func:`~sixdpose.registration.hypotheses.slides`), for
+            a model at least ``verify_slide_min_elong`` times as long along it as along its second: an elongated
             object whose visible part fits its middle as well as its end (a bottle's body hidden behind
             another object) is placed by the silhouette and the depth in front of it.
             verify_search_rounds, verify_search_n, verify_search_deg: local search of the best
@@ -247,6 +248,7 @@ class RegistrationConfig(Config):
     verify_detail_rel: float = bounded(0.05, min=0, max=1)
     verify_slides: int = bounded(0, min=0, max=20)
     verify_slide_rel: float = bounded(0.1, min=0, max=1, min_open=True)
+    verify_slide_min_elong: float = bounded(0.0, min=0, max=100)
     verify_search_rounds: int = bounded(0, min=0, max=100)
     verify_search_n: int = bounded(32, min=1, max=100_000)
     verify_search_deg: float = bounded(30.0, min=0, max=180, min_open=True)
@@ -295,6 +297,14 @@ VERIFY_BY_DEFAULT: tuple[str, ...] = ("default", "fast")
 #: grey-detail texture term; the benchmarks pass them as ``--set`` overrides (:func:`as_set_args`).
 VAL_CHOSEN_VERIFY: dict[str, float | int] = {"verify_near_symmetries": 6, "verify_detail_share": 0.5,
                                              "verify_detail_rel": 0.1}
+
+
+#: The learned stage's verification settings (``predict-pose --verify``, its hybrid fallback included; a
+#: ``--set`` wins): every hypothesis also slid along an elongated model's longest axis by 10, 20 and 30 % of
+#: its length (:func:`~sixdpose.registration.hypotheses.slides`). The dense head's fit can place such an
+#: object's visible part at its middle instead of its end. Chosen by a rule written before the scores on
+#: ``data/val`` and the YCB-Video sample's tuning scene (docs/pose.md, "Slides along the axis (session 19)").
+LEARNED_VERIFY: dict[str, float | int] = {"verify_slides": 3, "verify_slide_rel": 0.1, "verify_slide_min_elong": 1.5}
 
 
 def as_set_args(fields: dict) -> list[str]:
