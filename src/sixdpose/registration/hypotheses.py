@@ -213,12 +213,7 @@ def slides(surface: Surface, n_slides: int, step_rel: float, min_elong: float = 
         return np.zeros((0, 4, 4))
     a = surface.axes[:, 0]
     step = step_rel * float(extent[0])
-    out = []
-    for k in range(1, n_slides + 1):
-        for sgn in (1.0, -1.0):
-            X = np.eye(4)
-            X[:3, 3] = sgn * k * step * a
-            out.append(X)
+    out = [X_from(np.eye(3), sgn * k * step * a) for k in range(1, n_slides + 1) for sgn in (1.0, -1.0)]
     return np.stack(out) if out else np.zeros((0, 4, 4))
 
 
