@@ -174,7 +174,10 @@ class Estimator:
         from ..runs import pick_device
 
         dev = pick_device(device)  # auto / None: the GPU when present
+        from ..registration import LEARNED_VERIFY
+
         overrides, reg_overrides = _split_overrides(check_inference_overrides(overrides))
+        verify_fields = {**LEARNED_VERIFY, **reg_overrides}  # the verification's defaults, applied once; --set wins
         pose_ckpt = ck.load(pose, kind="pose")
         net, cfg = load_posenet(pose_ckpt, dev)
         cfg = cfg.replace(**overrides) if overrides else cfg
@@ -183,8 +186,8 @@ class Estimator:
             refiner_ckpt = ck.load(refiner, kind="refiner")
             ref_net, ref_cfg = load_refiner(refiner_ckpt, pose_ckpt, dev)
         self._setup(net, cfg, ck.classes_of(pose_ckpt), ref_net, ref_cfg, dev, iterations, icp, colour_verify, reader,
-                    score_thresh, seed, max_batch, verify=verify, reg_overrides=reg_overrides)
-        self._setup_fallback(fallback, fallback_profile, reg_overrides)
+                    score_thresh, seed, max_batch, verify=verify, verify_fields=verify_fields)
+        self._setup_fallback(fallback, fallback_profile, verify_fields)
         self.pose_ckpt, self.refiner_ckpt = pose_ckpt, refiner_ckpt
 
     @classmethod
@@ -206,8 +209,9 @@ class Estimator:
         return est
 
     def _setup(self, net, cfg, classes, refiner, refiner_cfg, device, iterations, icp, colour_verify, reader,
-               score_thresh, seed, max_batch, verify: bool = False, reg_overrides: dict | None = None) -> None:
-        """Every attribute of an estimator but the checkpoints (shared by both constructors)."""
+               score_thresh, seed, max_batch, verify: bool = False, verify_fields: dict | None = None) -> None:
+        """Every attribute of an estimator but the checkpoints (shared by both constructors);
+        ``verify_fields``: the ``verify_*`` fields of the registration config (LEARNED_VERIFY and the overrides)."""
         self.device, self.net, self.cfg = device, net, cfg
         self.classes = [tuple(c) for c in classes]
         self.class_index = {int(c[0]): k for k, c in enumerate(self.classes)}
@@ -245,9 +249,9 @@ class Estimator:
 
             warmup_colour()
         if icp or colour_verify or verify or self.colour_flips:
-            from ..registration import LEARNED_VERIFY, ReferenceCache, get_preset
+            from ..registration import ReferenceCache, get_preset
 
-            self.reg_cfg = get_preset("default", verify=verify, **{**LEARNED_VERIFY, **(reg_overrides or {})})
+            self.reg_cfg = get_preset("default", verify=verify, **(verify_fields or {}))
             self._cache = ReferenceCache(reader)
 
     def settings(self) -> dict:
@@ -268,10 +272,11 @@ class Estimator:
                           "instances_replaced": self.fallback_won} if self.fallback else None),
         }
 
-    def _setup_fallback(self, fallback: str | None, profile: str, reg_overrides: dict | None) -> None:
-        """The hybrid fallback of the constructor's ``fallback`` (see the class docstring); raises
-        :class:`~sixdpose.pose.data.PoseError` for an unknown method or profile or without ``verify``."""
-        from ..registration import LEARNED_VERIFY, METHODS, PRESETS, get_preset
+    def _setup_fallback(self, fallback: str | None, profile: str, verify_fields: dict | None) -> None:
+        """The hybrid fallback of the constructor's ``fallback`` (see the class docstring), verified with
+        ``verify_fields`` (as :meth:`_setup`); raises :class:`~sixdpose.pose.data.PoseError` for an unknown
+        method or profile or without ``verify``."""
+        from ..registration import METHODS, PRESETS, get_preset
 
         self.fallback, self.fallback_profile, self.fallback_cfg = fallback, profile, None
         self.fallback_tried = self.fallback_won = 0
@@ -284,7 +289,7 @@ class Estimator:
                             f"got {profile!r}")
         if not self.verify:
             raise PoseError("--fallback needs --verify (the fallback runs where the verified score is low)")
-        self.fallback_cfg = get_preset(profile, verify=True, **{**LEARNED_VERIFY, **(reg_overrides or {})})
+        self.fallback_cfg = get_preset(profile, verify=True, **(verify_fields or {}))
         if self.fallback_cfg.colour_verify:
             from ..registration import warmup_colour
 

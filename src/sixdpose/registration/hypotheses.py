@@ -128,7 +128,7 @@ class Surface:
 
     def __post_init__(self):
         self._f32: dict = {}
-        self._near: dict = {}  # near_symmetries() by its arguments
+        self._near: dict = {}  # near_symmetries() by its arguments, and slides()' principal extents
 
     def cast(self, name: str) -> np.ndarray:
         """The attribute ``name`` as a contiguous float32 array (cached: the Numba kernel's input)."""
@@ -206,9 +206,12 @@ def slides(surface: Surface, n_slides: int, step_rel: float, min_elong: float = 
     """Rigid motions ``X_ON`` (2 * n_slides, 4, 4) of the object frame: translations by ``k * step_rel`` x
     the samples' extent along the longest principal axis, along that axis, ``k = +-1 .. +-n_slides``
     (the identity is not included). None (shape (0, 4, 4)) when the model's extent along that axis is less
-    than ``min_elong`` times its extent along the second axis (a model not elongated)."""
-    proj = (surface.points - surface.centroid) @ surface.axes[:, :2]
-    extent = proj.max(axis=0) - proj.min(axis=0)
+    than ``min_elong`` times its extent along the second axis (a model not elongated). The extents are
+    computed once per surface (cached on it, as :func:`near_symmetries`)."""
+    extent = surface._near.get("principal_extents")
+    if extent is None:
+        proj = (surface.points - surface.centroid) @ surface.axes[:, :2]
+        extent = surface._near["principal_extents"] = proj.max(axis=0) - proj.min(axis=0)
     if extent[0] < min_elong * extent[1]:
         return np.zeros((0, 4, 4))
     a = surface.axes[:, 0]
