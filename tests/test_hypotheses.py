@@ -372,3 +372,74 @@ def test_slides_along_the_longest_axis_place_a_half_hidden_box_by_its_silhouette
     # off: the slid input pose is all there is
     v0 = H.verify_hypotheses(off, surf, frame, dataclasses.replace(cfg, verify_slides=0), obj_id=1)
     assert v0.n_hypotheses == 1 and np.allclose(v0.X_CO, off)
+
+
+BALL_R = 0.04  # radius of the textured ball (m)
+
+
+def ball_samples(step: float):
+    """Points and outward normals on a ball of radius BALL_R about the origin (a Fibonacci lattice)."""
+    n = int(4 * np.pi * BALL_R**2 / step**2)
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    r = np.sqrt(1 - z * z)
+    phi = np.pi * (1 + 5**0.5) * i
+    nrm = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    return BALL_R * nrm, nrm
+
+
+def ball_colours(p: np.ndarray) -> np.ndarray:
+    """A white ball with a red seam (a wavy band, as a baseball's: the same after a half turn about z) and a
+    dark logo on the side the camera sees, which tells the two apart."""
+    u = p / BALL_R
+    seam = np.abs(u[:, 2] - 0.5 * np.sin(2 * np.arctan2(u[:, 1], u[:, 0]))) < 0.08
+    logo = (u[:, 0] > 0.4) & (np.abs(u[:, 1]) < 0.3) & (u[:, 2] < 0)
+    col = np.ones((len(p), 3)) * 0.9
+    col[seam] = [0.8, 0.1, 0.1]
+    col[logo] = [0.1, 0.1, 0.3]
+    return col
+
+
+def render_ball(X_CO) -> H.Frame:
+    """The ball at ``X_CO`` splatted into a z-buffer (depth in m, RGB, mask) in front of a grey wall."""
+    p, n = ball_samples(0.0004)
+    c = ball_colours(p)
+    P = p @ X_CO[:3, :3].T + X_CO[:3, 3]
+    front = np.einsum("ij,ij->i", n @ X_CO[:3, :3].T, P) < 0
+    P, c = P[front], c[front]
+    u = np.round(K[0, 0] * P[:, 0] / P[:, 2] + K[0, 2]).astype(int)
+    v = np.round(K[1, 1] * P[:, 1] / P[:, 2] + K[1, 2]).astype(int)
+    depth, rgb = np.full(SHAPE, 2.0), np.full(SHAPE + (3,), 0.5)
+    order = np.argsort(-P[:, 2])
+    depth[v[order], u[order]], rgb[v[order], u[order]] = P[order, 2], c[order]
+    return H.Frame(depth, K, depth < 1.9, (rgb * 255).astype(np.uint8))
+
+
+def test_texture_search_turns_a_ball_its_geometry_cannot():
+    import dataclasses
+
+    from scipy.spatial.transform import Rotation
+
+    p, n = ball_samples(0.003)
+    dense, _ = ball_samples(0.001)
+    ball = H.build_surface(p, n, 0.003, 2 * BALL_R, dense, ball_colours(dense))
+    # the ball's geometry leaves its turn open, the box's does not
+    assert H.rotation_free(ball) and not H.rotation_free(surface())
+    R_true = Rotation.from_rotvec([0.4, -0.3, 0.2]).as_matrix()
+    X_true = X(R_true)
+    frame = render_ball(X_true)
+    R_off = Rotation.from_rotvec([0.0, 2.0, 1.0]).as_matrix()  # 128 degrees off, about the centre
+    off = X(R_true @ R_off)
+    cfg = dataclasses.replace(CFG, verify_texture_lattice=1000)
+
+    def angle(Xa):
+        return np.degrees(Rotation.from_matrix(Xa[:3, :3].T @ R_true).magnitude())
+
+    found = H.texture_search(off, ball, frame, cfg)
+    assert found.shape == (cfg.verify_texture_keep, 4, 4)
+    assert angle(found[0]) < 6 and np.allclose(found[0][:3, 3], X_true[:3, 3], atol=1e-3)
+    v = H.verify_hypotheses(off, ball, frame, cfg, obj_id=1)
+    assert v.index != 0 and angle(v.X_CO) < 6
+    # off (the default): the verification cannot turn the ball back
+    v0 = H.verify_hypotheses(off, ball, frame, CFG, obj_id=1)
+    assert angle(v0.X_CO) > 60

@@ -633,6 +633,9 @@ def test_the_learned_stage_verifies_with_its_slides_and_a_set_wins(pose_ds, tmp_
     for k, v in LEARNED_VERIFY.items():
         assert getattr(est.reg_cfg, k) == v and getattr(est.fallback_cfg, k) == v
         assert est.settings()["verify_config"][k] == v
+    # the texture search of a ball's turn: on, but not for the symmetric classes (their turn is not scored)
+    assert est.reg_cfg.verify_texture_lattice > 0 and est._reg_cfg_symmetric.verify_texture_lattice == 0
+    assert est._symmetric == {int(c[0]) for c in est.classes if c[2]}
     off = Estimator(run, device="cpu", icp=True, verify=True, reader=reader, overrides={"verify_slides": 0})
     assert off.reg_cfg.verify_slides == 0 and off.settings()["verify_config"]["verify_slides"] == 0
 

@@ -252,6 +252,8 @@ class Estimator:
             from ..registration import ReferenceCache, get_preset
 
             self.reg_cfg = get_preset("default", verify=verify, **(verify_fields or {}))
+            self._reg_cfg_symmetric = self.reg_cfg.replace(verify_texture_lattice=0)
+            self._symmetric = {int(c[0]) for c in self.classes if len(c) > 2 and c[2]}
             self._cache = ReferenceCache(reader)
 
     def settings(self) -> dict:
@@ -476,7 +478,9 @@ class Estimator:
         frame = Frame(sample.depth, sample.K, np.asarray(mask, dtype=bool), sample.rgb) if (
             self.verify and sample is not None and mask is not None) else None
         assert self._cache is not None  # _setup builds it whenever ICP or a check is asked for
-        r = refine_pose(X_from(R, t), inst.points, inst.obj_id, self._cache, self.reg_cfg, icp=self.icp,
+        # a symmetric object's turn is not scored (ADD-S): no texture search of its turn (a tennis ball)
+        cfg = self._reg_cfg_symmetric if int(inst.obj_id) in self._symmetric else self.reg_cfg
+        r = refine_pose(X_from(R, t), inst.points, inst.obj_id, self._cache, cfg, icp=self.icp,
                         colour_verify=self.colour_verify, colors=inst.colors, frame=frame)
         X_CO, verified = r.X_CO, float(r.score)
         if self.fallback and frame is not None and verified < self.reg_cfg.verify_retry_below:

@@ -5,7 +5,8 @@ fits the masked cloud as well as the right one (a turn about a near-symmetric ax
 texture decides, a flip of a partly occluded object). :func:`verify_hypotheses` keeps several
 hypotheses per instance (the input pose, the colour search's other basins, the global method's, and
 their turns about the model's principal axes through its centroid, optionally each slid along the
-model's longest axis), scores each against the frame
+model's longest axis, and for a ball, whose geometry leaves its turn open, the turns a coarse-to-fine
+search by texture finds: :func:`texture_search`), scores each against the frame
 without rendering but with occlusion reasoning, ICPs the best few and keeps the highest score.
 
 Scoring (:func:`score_hypotheses`), batched over hypotheses: the model's surface samples with normals
@@ -673,6 +674,159 @@ def local_search(Xs: np.ndarray, scores: np.ndarray, surface: Surface, frame: Fr
     return Xs, scores
 
 
+def rotation_free(surface: Surface, min_fit: float = 0.9, n: int = 32, seed: int = 0) -> bool:
+    """Whether the model's geometry leaves its turn open (a ball): at least ``min_fit`` of the surface
+    samples stay within two sample spacings of the surface under at least nine in ten of ``n`` random
+    rotations about the centroid. Cached on ``surface``."""
+    key = ("rotation_free", float(min_fit), int(n), int(seed))
+    hit = surface._near.get(key)
+    if hit is not None:
+        return bool(hit)
+    from scipy.spatial import cKDTree
+    from scipy.spatial.transform import Rotation
+
+    tree = cKDTree(surface.points)
+    c = surface.centroid
+    fits = []
+    for R in Rotation.random(n, random_state=seed).as_matrix():
+        d, _ = tree.query((surface.points - c) @ R.T + c, distance_upper_bound=2 * surface.spacing)
+        fits.append(float(np.mean(d <= 2 * surface.spacing)))
+    surface._near[key] = out = bool(np.mean(np.asarray(fits) >= min_fit) >= 0.9)
+    return out
+
+
+#: The coarse-to-fine schedule of :func:`texture_search`: (blur radius / diameter, search angle in
+#: degrees, rounds); the first level scores the lattice, the others refine by random turns of at most the
+#: angle (halved each round). Chosen on ``data/val``'s baseball (docs/pose.md, "Texture search").
+TEXTURE_LEVELS: tuple[tuple[float, float, int], ...] = ((0.15, 0.0, 0), (0.08, 20.0, 4), (0.04, 8.0, 3),
+                                                        (0.0, 4.0, 3))
+#: random turns per hypothesis and round of :func:`texture_search`'s refinement
+TEXTURE_TRIALS = 48
+
+
+def _blurred_surface(surface: Surface, rel: float) -> Surface:
+    """``surface`` with its colours averaged over the samples within ``rel`` x the diameter (cached)."""
+    if rel <= 0 or surface.chroma is None:
+        return surface
+    key = ("blurred", float(rel))
+    hit = surface._near.get(key)
+    if hit is not None:
+        return hit
+    import dataclasses
+
+    from scipy.spatial import cKDTree
+
+    from ..geometry import neighbourhood_means
+
+    nb = cKDTree(surface.points).query_ball_point(surface.points, rel * surface.diameter)
+    chroma = np.stack([neighbourhood_means(surface.chroma[:, k], nb) for k in range(3)], axis=1)
+    grey = neighbourhood_means(surface.grey, nb) if surface.grey is not None else None
+    out = dataclasses.replace(surface, chroma=chroma, grey=grey, detail=None)
+    surface._near[key] = out
+    return out
+
+
+def _blurred_frame(frame: Frame, sigma_px: float) -> Frame:
+    """``frame`` with its colours Gaussian-blurred by ``sigma_px`` inside the mask's box (a margin around)."""
+    if sigma_px <= 0 or frame.rgb is None:
+        return frame
+    from scipy.ndimage import gaussian_filter
+
+    vv, uu = np.nonzero(frame.mask)
+    if not len(vv):
+        return frame
+    pad = int(4 * sigma_px) + 2
+    H, W = frame.mask.shape
+    v0, v1 = max(vv.min() - pad, 0), min(vv.max() + pad + 1, H)
+    u0, u1 = max(uu.min() - pad, 0), min(uu.max() + pad + 1, W)
+    src = np.asarray(frame.rgb[v0:v1, u0:u1], dtype=np.float32)
+    if frame.rgb.dtype == np.uint8:
+        src = src / 255.0
+    rgb = np.zeros((H, W, 3), np.float32)
+    rgb[v0:v1, u0:u1] = np.stack([gaussian_filter(src[..., k], sigma_px) for k in range(3)], axis=-1)
+    return Frame(frame.depth, frame.K, frame.mask, rgb)
+
+
+def _ball_centre(surface: Surface, frame: Frame, iterations: int = 10) -> np.ndarray | None:
+    """The centre (3,) in the camera frame of a ball of the model's radius (the samples' median distance
+    to their centroid) fitted to the frame's masked cloud by Gauss-Newton on ``|p - x| - radius``; None
+    for fewer than 10 points."""
+    from ..datasets.geometry import backproject
+
+    obs, _, _ = backproject(frame.depth, frame.K, frame.mask, None)
+    if len(obs) < 10:
+        return None
+    radius = float(np.median(np.linalg.norm(surface.points - surface.centroid, axis=1)))
+    m = obs.mean(axis=0)
+    x = m + radius * m / max(float(np.linalg.norm(m)), 1e-9)  # behind the visible cap, seen from the camera
+    for _ in range(iterations):
+        d = obs - x
+        n = np.maximum(np.linalg.norm(d, axis=1), 1e-9)
+        J = -d / n[:, None]
+        step, *_ = np.linalg.lstsq(J, -(n - radius), rcond=None)
+        x = x + step
+        if np.linalg.norm(step) < 1e-5:
+            break
+    return x
+
+
+def texture_search(X_CO: np.ndarray, surface: Surface, frame: Frame, cfg: RegistrationConfig,
+                   seed: int = 0) -> np.ndarray:
+    """Poses (K, 4, 4) of an object whose geometry leaves its turn open, its turn found by texture alone.
+
+    ``X_CO`` (4, 4), its centre first moved onto the centre of a ball of the model's radius fitted to the
+    masked cloud, is turned about the model's centroid by ``verify_texture_lattice`` random rotations,
+    scored (:func:`score_hypotheses`) with the model's colours and the frame's blurred over
+    ``TEXTURE_LEVELS[0]``'s radius (a ball's seam, a few millimetres wide, has a basin of a few degrees;
+    blurred, of some 30), and the best ``verify_texture_keep`` are refined level by level of
+    :data:`TEXTURE_LEVELS` as the blur shrinks to none (random turns, :data:`TEXTURE_TRIALS` per pose and
+    round, a pose moving when a turn scores higher). Returns the refined poses, best first. Not in the
+    paper."""
+    from scipy.spatial.transform import Rotation
+
+    from .verify import _small_rotations
+
+    c = surface.centroid
+    f_px = float(frame.K[0, 0])
+    z = max(float(X_CO[2, 3]), 1e-3)
+
+    def level(rel: float) -> tuple[Surface, Frame]:
+        return _blurred_surface(surface, rel), _blurred_frame(frame, rel * surface.diameter * f_px / z / 2)
+
+    key = ("texture_lattice", int(cfg.verify_texture_lattice))
+    X_ON = surface._near.get(key)
+    if X_ON is None:
+        Rs = Rotation.random(cfg.verify_texture_lattice, random_state=7).as_matrix()
+        X_ON = surface._near[key] = np.stack([X_from(R, c - R @ c) for R in Rs])
+    rel0 = TEXTURE_LEVELS[0][0]
+    # the model's centre onto the centre of the ball fitted to the observed cloud first: a turn about the
+    # centre cannot mend a misplaced centre, and the input's may be far off when its turn was wrong
+    X0 = np.asarray(X_CO, np.float64).copy()
+    centre = _ball_centre(surface, frame)
+    if centre is not None:
+        X0[:3, 3] = centre - X0[:3, :3] @ c
+    Xs = np.concatenate([X0[None], np.einsum("ij,njk->nik", X0, X_ON)])
+    sc = score_hypotheses(Xs, *level(rel0), cfg).score
+    top = np.argsort(-sc, kind="stable")[: cfg.verify_texture_keep]
+    Xs = Xs[top].copy()
+    rng = np.random.default_rng(seed)
+    for rel, deg, rounds in TEXTURE_LEVELS[1:]:
+        surf_l, frame_l = level(rel)
+        sc = score_hypotheses(Xs, surf_l, frame_l, cfg).score
+        ang = deg
+        for _ in range(rounds):
+            S = _small_rotations(TEXTURE_TRIALS, ang, rng)
+            T = np.stack([X_from(Si, c - Si @ c) for Si in S])
+            trial = np.einsum("hij,njk->hnik", Xs, T)
+            st = score_hypotheses(trial.reshape(-1, 4, 4), surf_l, frame_l, cfg).score.reshape(len(Xs), -1)
+            j = np.argmax(st, axis=1)
+            better = st[np.arange(len(Xs)), j] > sc
+            Xs[better] = trial[np.arange(len(Xs)), j][better]
+            sc = np.where(better, st[np.arange(len(Xs)), j], sc)
+            ang /= 2.0
+    return Xs[np.argsort(-sc, kind="stable")]
+
+
 @dataclass
 class Verified:
     """Output of :func:`verify_hypotheses`: the kept pose ``X_CO`` (4, 4), its ``score`` (in [-1, 1]),
@@ -713,6 +867,9 @@ def verify_hypotheses(
     bases = [np.asarray(X_CO, dtype=np.float64)]
     if extra is not None:
         bases += [np.asarray(e, dtype=np.float64) for e in extra]
+    if cfg.verify_texture_lattice > 0 and surface.chroma is not None and frame.rgb is not None \
+            and rotation_free(surface, cfg.verify_texture_min_fit):
+        bases += list(texture_search(bases[0], surface, frame, cfg, seed=cfg.seed))
     T = turns(surface, cfg.verify_turns) if cfg.verify_turns > 1 else np.eye(4)[None]
     if cfg.verify_near_symmetries > 0:
         T = np.concatenate([T, near_symmetries(surface, keep=cfg.verify_near_symmetries)])

@@ -172,6 +172,13 @@ class RegistrationConfig(Config):
             a model at least ``verify_slide_min_elong`` times as long along it as along its second: an elongated
             object whose visible part fits its middle as well as its end (a bottle's body hidden behind
             another object) is placed by the silhouette and the depth in front of it.
+            verify_texture_lattice, verify_texture_keep, verify_texture_min_fit: for a model whose
+            geometry does not tell its turns apart (a ball: at least ``verify_texture_min_fit`` of the
+            samples stay on the surface under nine in ten random turns about its centroid,
+            :func:`~sixdpose.registration.hypotheses.rotation_free`), search its turn by texture alone, coarse
+            to fine (:func:`~sixdpose.registration.hypotheses.texture_search`: ``verify_texture_lattice``
+            random turns scored on blurred colours, the best ``verify_texture_keep`` refined as the blur
+            shrinks) and add the results as bases (0: none).
             verify_search_rounds, verify_search_n, verify_search_deg: local search of the best
             ``verify_icp`` hypotheses before ICP (:func:`~sixdpose.registration.hypotheses.local_search`;
             0 rounds: none). verify_retry_below, verify_retries: an instance whose verified score stays
@@ -249,6 +256,9 @@ class RegistrationConfig(Config):
     verify_slides: int = bounded(0, min=0, max=20)
     verify_slide_rel: float = bounded(0.1, min=0, max=1, min_open=True)
     verify_slide_min_elong: float = bounded(0.0, min=0, max=100)
+    verify_texture_lattice: int = bounded(0, min=0, max=100_000)
+    verify_texture_keep: int = bounded(6, min=1, max=100)
+    verify_texture_min_fit: float = bounded(0.9, min=0, max=1)
     verify_search_rounds: int = bounded(0, min=0, max=100)
     verify_search_n: int = bounded(32, min=1, max=100_000)
     verify_search_deg: float = bounded(30.0, min=0, max=180, min_open=True)
@@ -304,7 +314,12 @@ VAL_CHOSEN_VERIFY: dict[str, float | int] = {"verify_near_symmetries": 6, "verif
 #: its length (:func:`~sixdpose.registration.hypotheses.slides`). The dense head's fit can place such an
 #: object's visible part at its middle instead of its end. Chosen by a rule written before the scores on
 #: ``data/val`` and the YCB-Video sample's tuning scene (docs/pose.md, "Slides along the axis (session 19)").
-LEARNED_VERIFY: dict[str, float | int] = {"verify_slides": 3, "verify_slide_rel": 0.1, "verify_slide_min_elong": 1.5}
+#: And for an asymmetric ball (a baseball, whose geometry leaves its turn open): its turn searched by texture
+#: (:func:`~sixdpose.registration.hypotheses.texture_search`, 2,000 lattice turns; ``predict-pose`` skips it
+#: for the checkpoint's symmetric classes), chosen by a rule written before the scores on ``data/val``
+#: (docs/pose.md, "Texture search for a ball (session 20)").
+LEARNED_VERIFY: dict[str, float | int] = {"verify_slides": 3, "verify_slide_rel": 0.1, "verify_slide_min_elong": 1.5,
+                                          "verify_texture_lattice": 2000}
 
 
 def as_set_args(fields: dict) -> list[str]:
