@@ -70,6 +70,9 @@ METHODS: tuple[Method, ...] = (
     # fit), trained on the same data with mk DENSE_<profile>'s recipe (that of the synthetic-to-real dense head)
     Method("dense", "dense head", "learned", "predict-pose --pose {runs}/pose_dense"),
     Method("dense_icp", "dense head + ICP", "learned", "predict-pose --pose {runs}/pose_dense --icp"),
+    # + the hypothesis verification with the learned stage's defaults (registration.LEARNED_VERIFY)
+    Method("dense_icp_verify", "dense head + ICP + verification", "learned",
+           "predict-pose --pose {runs}/pose_dense --icp --verify"),
 )
 #: key -> :class:`Method`.
 METHOD: dict[str, Method] = {m.key: m for m in METHODS}

@@ -127,7 +127,8 @@ _T3 = TABLES["III"]
 
 #: The dense head's results on ``data/test`` (label, result): rows of :data:`LEARNED_CPU` and columns of the
 #: per-object block, shown only where their result exists.
-DENSE_CPU = (("dense head", "cpu/test_gt_dense"), ("dense head + ICP", "cpu/test_gt_dense_icp"))
+DENSE_CPU = (("dense head", "cpu/test_gt_dense"), ("dense head + ICP", "cpu/test_gt_dense_icp"),
+             ("dense head + ICP + verification", "cpu/test_gt_dense_icp_verify"))
 #: The same rows with the ``cpu`` Mask R-CNN's predicted masks.
 DENSE_CPU_PRED = tuple((label, name.replace("test_gt_", "test_pred_")) for label, name in DENSE_CPU)
 #: Learned-pose evaluations of the ``cpu`` runs on ``data/test``: (label, masks, result, method key of

@@ -275,7 +275,8 @@ def write_per_object(entries: dict, split: str, masks: str, csv_path, tex_path) 
              "super4pcs": "S4PCS", "super4pcs_icp": two("S4PCS", "+ICP"), "learned_it0": "L0", "learned_it2": "L2",
              "learned_it2_icp": two("L2", "+ICP"), "learned_it2_colour": two("L2", "+col."),
              "ransac_icp_paper": two("RANSAC", "+ICP (p.)"), "fgr_icp_paper": two("FGR", "+ICP (p.)"),
-             "super4pcs_paper": two("S4PCS", "(p.)"), "dense": "D", "dense_icp": two("D", "+ICP")}
+             "super4pcs_paper": two("S4PCS", "(p.)"), "dense": "D", "dense_icp": two("D", "+ICP"),
+             "dense_icp_verify": two("D", "+ICP+ver.")}
     cols = ["obj_id", "name", "n_gt"] + [m.key for m in methods]
     write_table(
         [{c: r.get(c) for c in cols} for r in table],
