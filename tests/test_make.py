@@ -56,16 +56,18 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
         if "--data ../shared/data/ycbv_sample" in line
     ]
     evals = [line for line in _lines(out, "evaluate") if "ycbv_sample" not in line and kinect not in line]
-    # 12 methods (6 hybrid, 4 learned, the dense head alone and + ICP) x 2 splits x 2 mask sources, + at cpu
+    # 13 methods (6 hybrid, 4 learned, the dense head alone, + ICP, + ICP + verification) x 2 splits x 2 mask
+    # sources, + at cpu
     # and paper the 3 hybrid rows with the paper's settings
     paper_rows = [line for line in poses if "--preset paper" in line]
     assert len(paper_rows) == (12 if ycbv else 0)
-    assert len(poses) == 48 + len(paper_rows) and len(evals) == len(poses)
+    assert len(poses) == 52 + len(paper_rows) and len(evals) == len(poses)
     # the dense head (runs/P/pose_dense) trained once on the training data, with DENSE_<profile>'s recipe
     dense = [line for line in _lines(out, "train-pose") if f"--out runs/{profile}/pose_dense " in line]
     assert len(dense) == 1 and f"--data {train} " in dense[0]
     assert out.split(dense[0], 1)[1].lstrip().startswith(("--profile", "--resume")) or "--resume" in dense[0]
-    assert sum(f"--pose runs/{profile}/pose_dense" in line for line in poses) == 8
+    assert sum(f"--pose runs/{profile}/pose_dense" in line for line in poses) == 12
+    assert sum(f"--pose runs/{profile}/pose_dense --icp --verify" in line for line in poses) == 4
     assert sorted({re.search(r"_(?:gt|pred)_(\w+_paper)\.csv", line).group(1) for line in paper_rows}) == \
         (["fgr_icp_paper", "ransac_icp_paper", "super4pcs_paper"] if ycbv else [])
     assert all(line.startswith(".venv/bin/sixdpose register ") for line in paper_rows)
