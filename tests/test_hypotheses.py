@@ -56,11 +56,9 @@ def rot(axis: int, deg: float) -> np.ndarray:
     return Rotation.from_rotvec(v).as_matrix()
 
 
-def render(X_CO, occluder: float | None = None, lighting=(1.0, 0.0)):
-    """Depth (m), RGB (uint8) and the visible mask of the box at ``X_CO`` by splatting dense samples
-    into a z-buffer; ``occluder``: a plane at this depth hiding the image's left half of the object."""
-    p, n = box_samples(0.0005)
-    c = colours_of(p)
+def splat(p: np.ndarray, n: np.ndarray, c: np.ndarray, X_CO) -> tuple[np.ndarray, np.ndarray]:
+    """Depth (m) and RGB in [0, 1] of the samples ``p`` (normals ``n``, colours ``c``; object frame) at
+    ``X_CO``, splatted into a z-buffer in front of a grey wall 2 m away."""
     P = p @ X_CO[:3, :3].T + X_CO[:3, 3]
     front = np.einsum("ij,ij->i", n @ X_CO[:3, :3].T, P) < 0
     P, c = P[front], c[front]
@@ -71,6 +69,14 @@ def render(X_CO, occluder: float | None = None, lighting=(1.0, 0.0)):
     order = np.argsort(-P[:, 2])  # far first: the nearest written last
     depth[v[order], u[order]] = P[order, 2]
     rgb[v[order], u[order]] = c[order]
+    return depth, rgb
+
+
+def render(X_CO, occluder: float | None = None, lighting=(1.0, 0.0)):
+    """Depth (m), RGB (uint8) and the visible mask of the box at ``X_CO`` by splatting dense samples
+    into a z-buffer; ``occluder``: a plane at this depth hiding the image's left half of the object."""
+    p, n = box_samples(0.0005)
+    depth, rgb = splat(p, n, colours_of(p), X_CO)
     mask = depth < 1.9
     if occluder is not None:
         cols = np.flatnonzero(mask.any(axis=0))
@@ -403,15 +409,7 @@ def ball_colours(p: np.ndarray) -> np.ndarray:
 def render_ball(X_CO) -> H.Frame:
     """The ball at ``X_CO`` splatted into a z-buffer (depth in m, RGB, mask) in front of a grey wall."""
     p, n = ball_samples(0.0004)
-    c = ball_colours(p)
-    P = p @ X_CO[:3, :3].T + X_CO[:3, 3]
-    front = np.einsum("ij,ij->i", n @ X_CO[:3, :3].T, P) < 0
-    P, c = P[front], c[front]
-    u = np.round(K[0, 0] * P[:, 0] / P[:, 2] + K[0, 2]).astype(int)
-    v = np.round(K[1, 1] * P[:, 1] / P[:, 2] + K[1, 2]).astype(int)
-    depth, rgb = np.full(SHAPE, 2.0), np.full(SHAPE + (3,), 0.5)
-    order = np.argsort(-P[:, 2])
-    depth[v[order], u[order]], rgb[v[order], u[order]] = P[order, 2], c[order]
+    depth, rgb = splat(p, n, ball_colours(p), X_CO)
     return H.Frame(depth, K, depth < 1.9, (rgb * 255).astype(np.uint8))
 
 
