@@ -634,8 +634,13 @@ def test_the_learned_stage_verifies_with_its_slides_and_a_set_wins(pose_ds, tmp_
         assert getattr(est.reg_cfg, k) == v and getattr(est.fallback_cfg, k) == v
         assert est.settings()["verify_config"][k] == v
     # the texture search of a ball's turn: on, but not for the symmetric classes (their turn is not scored)
-    assert est.reg_cfg.verify_texture_lattice > 0 and est._reg_cfg_symmetric.verify_texture_lattice == 0
     assert est._symmetric == {int(c[0]) for c in est.classes if c[2]}
+    sym = int(est.classes[0][0])
+    other = sym + 1  # not a symmetric class
+    est._symmetric = {sym}  # as a checkpoint with a symmetric first class would have it
+    for cfg in (est.reg_cfg, est.fallback_cfg):  # the learned pose's verification and the fallback's alike
+        assert cfg.verify_texture_lattice > 0
+        assert est._for_object(cfg, sym).verify_texture_lattice == 0 and est._for_object(cfg, other) is cfg
     off = Estimator(run, device="cpu", icp=True, verify=True, reader=reader, overrides={"verify_slides": 0})
     assert off.reg_cfg.verify_slides == 0 and off.settings()["verify_config"]["verify_slides"] == 0
 

@@ -252,7 +252,6 @@ class Estimator:
             from ..registration import ReferenceCache, get_preset
 
             self.reg_cfg = get_preset("default", verify=verify, **(verify_fields or {}))
-            self._reg_cfg_symmetric = self.reg_cfg.replace(verify_texture_lattice=0)
             self._symmetric = {int(c[0]) for c in self.classes if len(c) > 2 and c[2]}
             self._cache = ReferenceCache(reader)
 
@@ -478,8 +477,7 @@ class Estimator:
         frame = Frame(sample.depth, sample.K, np.asarray(mask, dtype=bool), sample.rgb) if (
             self.verify and sample is not None and mask is not None) else None
         assert self._cache is not None  # _setup builds it whenever ICP or a check is asked for
-        # a symmetric object's turn is not scored (ADD-S): no texture search of its turn (a tennis ball)
-        cfg = self._reg_cfg_symmetric if int(inst.obj_id) in self._symmetric else self.reg_cfg
+        cfg = self._for_object(self.reg_cfg, inst.obj_id)
         r = refine_pose(X_from(R, t), inst.points, inst.obj_id, self._cache, cfg, icp=self.icp,
                         colour_verify=self.colour_verify, colors=inst.colors, frame=frame)
         X_CO, verified = r.X_CO, float(r.score)
@@ -487,6 +485,14 @@ class Estimator:
             X_CO, verified = self._fall_back(inst, sample, frame, X_CO, verified)
         score = max(verified, MIN_VERIFIED_SCORE) if frame is not None else inst.score
         return X_CO[:3, :3], X_CO[:3, 3], score
+
+    def _for_object(self, cfg, obj_id: int):
+        """``cfg`` (a RegistrationConfig) for one object: without the texture search of its turn
+        (``verify_texture_lattice`` 0) for a symmetric class of the checkpoint, whose turn ADD-S does not
+        score (a tennis ball), else ``cfg`` itself."""
+        if cfg.verify_texture_lattice and int(obj_id) in self._symmetric:
+            return cfg.replace(verify_texture_lattice=0)
+        return cfg
 
     def _fall_back(self, inst, sample, frame, X_CO: np.ndarray, verified: float) -> tuple[np.ndarray, float]:
         """Register one instance whose verified learned pose ``X_CO`` (score ``verified``) fits the frame
@@ -498,8 +504,8 @@ class Estimator:
 
         base, method, cache = self.fallback_cfg, self.fallback, self._cache
         assert base is not None and method is not None and cache is not None  # set by _setup_fallback, _setup
-        cfg = dataclasses.replace(base, seed=instance_seed(base.seed, sample.scene_id, sample.im_id, inst.obj_id,
-                                                           inst.index))
+        cfg = dataclasses.replace(self._for_object(base, inst.obj_id),
+                                  seed=instance_seed(base.seed, sample.scene_id, sample.im_id, inst.obj_id, inst.index))
         self.fallback_tried += 1
         try:
             r = estimate_pose(inst.points, inst.obj_id, method, cache, cfg, icp=self.icp,

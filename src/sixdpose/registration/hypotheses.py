@@ -78,6 +78,23 @@ class Frame:
             self._arrays = (np.nonzero(mask), mask, depth)
         return self._arrays
 
+    def box(self, pad_px: int) -> tuple[int, int, int, int] | None:
+        """``(v0, v1, u0, u1)``: the mask's bounding box grown by ``pad_px`` pixels on every side and clipped
+        to the image (rows ``v0:v1``, columns ``u0:u1``); None for an empty mask."""
+        vv, uu = np.nonzero(self.mask)
+        if not len(vv):
+            return None
+        H, W = self.mask.shape
+        return (max(int(vv.min()) - pad_px, 0), min(int(vv.max()) + pad_px + 1, H),
+                max(int(uu.min()) - pad_px, 0), min(int(uu.max()) + pad_px + 1, W))
+
+    def rgb_crop(self, box: tuple[int, int, int, int], dtype=np.float32) -> np.ndarray:
+        """The colours inside ``box`` (from :meth:`box`) as ``dtype`` in [0, 1] (uint8 divided by 255)."""
+        v0, v1, u0, u1 = box
+        assert self.rgb is not None
+        out = np.asarray(self.rgb[v0:v1, u0:u1], dtype=dtype)
+        return out / dtype(255.0) if self.rgb.dtype == np.uint8 else out
+
     def detail(self, radius_px: float) -> np.ndarray:
         """(H, W) float32 grey detail inside the mask: the grey value minus its mean over the mask's
         pixels within about ``radius_px`` (a normalised box filter, so neither the background nor the
@@ -88,14 +105,10 @@ class Frame:
         from scipy.ndimage import uniform_filter
 
         out = np.zeros(self.mask.shape, np.float32)
-        vv, uu = np.nonzero(self.mask)
-        if self.rgb is not None and len(vv):
-            H, W = self.mask.shape
-            v0, v1 = max(vv.min() - 2 * r, 0), min(vv.max() + 2 * r + 1, H)
-            u0, u1 = max(uu.min() - 2 * r, 0), min(uu.max() + 2 * r + 1, W)
-            rgb = np.asarray(self.rgb[v0:v1, u0:u1], dtype=np.float64)
-            if self.rgb.dtype == np.uint8:
-                rgb = rgb / 255.0
+        box = self.box(2 * r)
+        if self.rgb is not None and box is not None:
+            v0, v1, u0, u1 = box
+            rgb = self.rgb_crop(box, np.float64)
             m = self.mask[v0:v1, u0:u1].astype(np.float64)
             g = grey_of(rgb)
             mean = uniform_filter(g * m, 2 * r + 1) / np.maximum(uniform_filter(m, 2 * r + 1), 1e-6)
@@ -646,32 +659,44 @@ def recentred(Xs: np.ndarray, surface: Surface, frame: Frame) -> np.ndarray:
     return out
 
 
+def turn_search(Xs: np.ndarray, scores: np.ndarray, surface: Surface, frame: Frame, cfg: RegistrationConfig,
+                rng: np.random.Generator, n: int, deg: float, rounds: int,
+                recentre: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Improve poses ``Xs`` (H, 4, 4) of scores ``scores`` (H,) by turns about the model's centroid:
+    ``rounds`` rounds of ``n`` random rotations of at most ``deg`` degrees (halved each round) per pose,
+    each also recentred on the observed cloud (:func:`recentred`) when ``recentre``; a pose moves when a
+    trial scores higher. Returns ``(poses, scores)``, new arrays."""
+    from .verify import _small_rotations
+
+    Xs, scores = Xs.copy(), np.asarray(scores, dtype=np.float64).copy()
+    c = surface.centroid
+    ang = deg
+    for _ in range(rounds):
+        S = _small_rotations(n, ang, rng)
+        X_ON = np.stack([X_from(Si, c - Si @ c) for Si in S])
+        trial = np.einsum("hij,njk->hnik", Xs, X_ON).reshape(-1, 4, 4)
+        if recentre:
+            trial = np.concatenate([trial, recentred(trial, surface, frame)])
+        k = 1 + int(recentre)
+        st = score_hypotheses(trial, surface, frame, cfg).score.reshape(k, len(Xs), n)
+        trial = trial.reshape(k, len(Xs), n, 4, 4)
+        for h in range(len(Xs)):
+            a, j = np.unravel_index(int(np.argmax(st[:, h])), (k, n))
+            if st[a, h, j] > scores[h]:
+                Xs[h], scores[h] = trial[a, h, j], st[a, h, j]
+        ang /= 2.0
+    return Xs, scores
+
+
 def local_search(Xs: np.ndarray, scores: np.ndarray, surface: Surface, frame: Frame, cfg: RegistrationConfig,
                  seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Improve poses ``Xs`` (H, 4, 4) of scores ``scores`` (H,) by rotations about the model's centroid:
     ``verify_search_rounds`` rounds of ``verify_search_n`` random rotations of at most
     ``verify_search_deg`` degrees (halved each round) per pose, each also recentred on the observed
-    cloud (:func:`recentred`); a pose moves when a trial scores higher. Returns ``(poses, scores)``."""
-    from .verify import _small_rotations
-
-    rng = np.random.default_rng(seed)
-    Xs, scores = Xs.copy(), np.asarray(scores, dtype=np.float64).copy()
-    c = surface.centroid
-    ang = cfg.verify_search_deg
-    n = cfg.verify_search_n
-    for _ in range(cfg.verify_search_rounds):
-        S = _small_rotations(n, ang, rng)
-        X_ON = np.stack([X_from(Si, c - Si @ c) for Si in S])
-        trial = np.einsum("hij,njk->hnik", Xs, X_ON).reshape(-1, 4, 4)
-        trial = np.concatenate([trial, recentred(trial, surface, frame)])
-        st = score_hypotheses(trial, surface, frame, cfg).score.reshape(2, len(Xs), n)
-        trial = trial.reshape(2, len(Xs), n, 4, 4)
-        for h in range(len(Xs)):
-            a, j = np.unravel_index(int(np.argmax(st[:, h])), (2, n))
-            if st[a, h, j] > scores[h]:
-                Xs[h], scores[h] = trial[a, h, j], st[a, h, j]
-        ang /= 2.0
-    return Xs, scores
+    cloud (:func:`recentred`); a pose moves when a trial scores higher (:func:`turn_search`). Returns
+    ``(poses, scores)``."""
+    return turn_search(Xs, scores, surface, frame, cfg, np.random.default_rng(seed), cfg.verify_search_n,
+                       cfg.verify_search_deg, cfg.verify_search_rounds, recentre=True)
 
 
 def rotation_free(surface: Surface, min_fit: float = 0.9, n: int = 32, seed: int = 0) -> bool:
@@ -732,17 +757,12 @@ def _blurred_frame(frame: Frame, sigma_px: float) -> Frame:
         return frame
     from scipy.ndimage import gaussian_filter
 
-    vv, uu = np.nonzero(frame.mask)
-    if not len(vv):
+    box = frame.box(int(4 * sigma_px) + 2)
+    if box is None:
         return frame
-    pad = int(4 * sigma_px) + 2
-    H, W = frame.mask.shape
-    v0, v1 = max(vv.min() - pad, 0), min(vv.max() + pad + 1, H)
-    u0, u1 = max(uu.min() - pad, 0), min(uu.max() + pad + 1, W)
-    src = np.asarray(frame.rgb[v0:v1, u0:u1], dtype=np.float32)
-    if frame.rgb.dtype == np.uint8:
-        src = src / 255.0
-    rgb = np.zeros((H, W, 3), np.float32)
+    v0, v1, u0, u1 = box
+    src = frame.rgb_crop(box, np.float32)
+    rgb = np.zeros((*frame.mask.shape, 3), np.float32)
     rgb[v0:v1, u0:u1] = np.stack([gaussian_filter(src[..., k], sigma_px) for k in range(3)], axis=-1)
     return Frame(frame.depth, frame.K, frame.mask, rgb)
 
@@ -784,8 +804,6 @@ def texture_search(X_CO: np.ndarray, surface: Surface, frame: Frame, cfg: Regist
     paper."""
     from scipy.spatial.transform import Rotation
 
-    from .verify import _small_rotations
-
     c = surface.centroid
     f_px = float(frame.K[0, 0])
     z = max(float(X_CO[2, 3]), 1e-3)
@@ -813,17 +831,7 @@ def texture_search(X_CO: np.ndarray, surface: Surface, frame: Frame, cfg: Regist
     for rel, deg, rounds in TEXTURE_LEVELS[1:]:
         surf_l, frame_l = level(rel)
         sc = score_hypotheses(Xs, surf_l, frame_l, cfg).score
-        ang = deg
-        for _ in range(rounds):
-            S = _small_rotations(TEXTURE_TRIALS, ang, rng)
-            T = np.stack([X_from(Si, c - Si @ c) for Si in S])
-            trial = np.einsum("hij,njk->hnik", Xs, T)
-            st = score_hypotheses(trial.reshape(-1, 4, 4), surf_l, frame_l, cfg).score.reshape(len(Xs), -1)
-            j = np.argmax(st, axis=1)
-            better = st[np.arange(len(Xs)), j] > sc
-            Xs[better] = trial[np.arange(len(Xs)), j][better]
-            sc = np.where(better, st[np.arange(len(Xs)), j], sc)
-            ang /= 2.0
+        Xs, sc = turn_search(Xs, sc, surf_l, frame_l, cfg, rng, TEXTURE_TRIALS, deg, rounds)
     return Xs[np.argsort(-sc, kind="stable")]
 
 
