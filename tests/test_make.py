@@ -164,7 +164,9 @@ _TRAIN = re.compile(r"\.venv/bin/sixdpose (train-seg|train-pose|train-refiner|po
 def trainings(out: str) -> dict[str, list[str]]:
     """Every training command of a ``make -n`` plan (continuation lines joined), keyed by what it trains:
     the command and its arguments without ``--out`` and ``--no-progress`` (same key: the same network);
-    the values are the ``--out`` directories."""
+    the values are the ``--out`` directories. A ``--resume`` command (the plan's choice where the directory
+    holds a ``last.pt``, as the smoke graph running beside the tests leaves mid-training) continues that
+    directory's own saved config, so its key is its directory."""
     found: dict[str, list[str]] = {}
     for line in out.replace("\\\n", " ").splitlines():
         m = _TRAIN.search(line)
@@ -173,6 +175,8 @@ def trainings(out: str) -> dict[str, list[str]]:
         args = " ".join(m.group(2).split())
         outdir = re.search(r"--out (\S+)", args).group(1)
         key = m.group(1) + " " + " ".join(re.sub(r"--out \S+|--no-progress", " ", args).split())
+        if "--resume" in args.split():
+            key += " " + outdir
         found.setdefault(key, []).append(outdir)
     return found
 
@@ -193,6 +197,10 @@ def test_the_duplicate_check_finds_a_duplicate():
             ".venv/bin/sixdpose train-pose --data data/ycbv --out runs/p/c --no-progress --profile paper --set x=1\n")
     found = trainings(plan)
     assert sorted(found.values(), key=len) == [["runs/p/c"], ["runs/p/a", "runs/p/b"]]
+    # two directories being resumed (each continues its own saved config) are two networks
+    resumed = (".venv/bin/sixdpose train-pose --data data/smoke --out runs/s/pose --no-progress --resume\n"
+               ".venv/bin/sixdpose train-pose --data data/smoke --out runs/s/pose_dense --no-progress --resume\n")
+    assert sorted(trainings(resumed).values()) == [["runs/s/pose"], ["runs/s/pose_dense"]]
 
 
 # --------------------------------------------------------------------------------------------
