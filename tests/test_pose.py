@@ -641,6 +641,7 @@ def test_the_learned_stage_verifies_with_its_slides_and_a_set_wins(pose_ds, tmp_
     for cfg in (est.reg_cfg, est.fallback_cfg):  # the learned pose's verification and the fallback's alike
         assert cfg.verify_texture_lattice > 0
         assert est._for_object(cfg, sym).verify_texture_lattice == 0 and est._for_object(cfg, other) is cfg
+        assert est._for_object(cfg, sym) is est._for_object(cfg, sym)  # made once per config
     off = Estimator(run, device="cpu", icp=True, verify=True, reader=reader, overrides={"verify_slides": 0})
     assert off.reg_cfg.verify_slides == 0 and off.settings()["verify_config"]["verify_slides"] == 0
 

@@ -253,6 +253,7 @@ class Estimator:
 
             self.reg_cfg = get_preset("default", verify=verify, **(verify_fields or {}))
             self._symmetric = {int(c[0]) for c in self.classes if len(c) > 2 and c[2]}
+            self._texture_off: dict[int, tuple] = {}  # id(cfg) -> (cfg, cfg without the texture search)
             self._cache = ReferenceCache(reader)
 
     def settings(self) -> dict:
@@ -489,10 +490,14 @@ class Estimator:
     def _for_object(self, cfg, obj_id: int):
         """``cfg`` (a RegistrationConfig) for one object: without the texture search of its turn
         (``verify_texture_lattice`` 0) for a symmetric class of the checkpoint, whose turn ADD-S does not
-        score (a tennis ball), else ``cfg`` itself."""
-        if cfg.verify_texture_lattice and int(obj_id) in self._symmetric:
-            return cfg.replace(verify_texture_lattice=0)
-        return cfg
+        score (a tennis ball), else ``cfg`` itself. The copy is made once per ``cfg`` (a validated replace
+        costs about 2 ms, too much per instance)."""
+        if not (cfg.verify_texture_lattice and int(obj_id) in self._symmetric):
+            return cfg
+        hit = self._texture_off.get(id(cfg))
+        if hit is None or hit[0] is not cfg:
+            hit = self._texture_off[id(cfg)] = (cfg, cfg.replace(verify_texture_lattice=0))
+        return hit[1]
 
     def _fall_back(self, inst, sample, frame, X_CO: np.ndarray, verified: float) -> tuple[np.ndarray, float]:
         """Register one instance whose verified learned pose ``X_CO`` (score ``verified``) fits the frame
