@@ -66,6 +66,30 @@ def test_paper_model_is_torchvision_maskrcnn_resnet50_fpn():
     assert all(p.requires_grad for p in ours.parameters())
 
 
+@pytest.mark.parametrize("backbone", ["mobilenet_v3_large", "mobilenet_v3_small"])
+def test_mobilenet_backbone_feeds_the_pyramid_at_a_resnets_strides(backbone):
+    """A MobileNetV3 Mask R-CNN: the pyramid's levels have the strides of a ResNet's (4 to 64), the deepest
+    ``trainable_layers`` stages train and the others are frozen (the stem first), and no other MobileNet is
+    accepted."""
+    from sixdpose.segmentation.model import build_model
+
+    x = torch.rand(1, 3, 96, 128)
+    model, init = build_model(profile_config("smoke", backbone=backbone), 3)
+    assert init == "random" and all(p.requires_grad for p in model.parameters())
+    feats = model.eval().backbone(x)
+    assert [tuple(f.shape[-2:]) for f in feats.values()] == [(24, 32), (12, 16), (6, 8), (3, 4), (2, 2)]
+    body = model.backbone.body
+    frozen, _ = build_model(profile_config("smoke", backbone=backbone, trainable_layers=2), 3)
+    trains = {n for n, p in frozen.backbone.body.named_parameters() if p.requires_grad}
+    deepest = max(int(n.split(".")[0]) for n, _ in body.named_parameters())
+    assert any(n.startswith(f"{deepest}.") for n in trains) and not any(n.startswith("0.") for n in trains)
+    assert 0 < len(trains) < len(list(body.parameters()))
+    none, _ = build_model(profile_config("smoke", backbone=backbone, trainable_layers=0), 3)
+    assert not any(p.requires_grad for p in none.backbone.body.parameters())
+    with pytest.raises(ValueError, match="backbone"):
+        profile_config("smoke", backbone="mobilenet_v2")
+
+
 def test_offline_pretrained_falls_back_with_one_line(monkeypatch, tmp_path, caplog):
     from sixdpose.segmentation.model import build_model
 

@@ -177,3 +177,27 @@ def test_hybrid_runner_reads_segment_output(seg_data, trained, predicted, tmp_pa
     rows = csv.read_text().strip().splitlines()[1:]
     assert len(rows) == expected and expected > 0
     assert {(int(r.split(",")[0]), int(r.split(",")[1])) for r in rows} <= set(keys)
+
+
+@pytest.mark.slow
+def test_the_backbone_benchmark_scores_held_out_images_and_times_them(seg_data, trained, tmp_path, capsys):
+    """benchmarks/seg_backbones.py: one row per run with its held-out images' AP and its time per image; the
+    result artifact is written; a directory that is not a run is refused with exit status 2."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "seg_backbones.py"
+    spec = importlib.util.spec_from_file_location("seg_backbones", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    run = str(trained[0])
+    args = ["--runs", run, "--data", str(seg_data), "--time-data", str(seg_data), "--frames", "2",
+            "--results-dir", str(tmp_path), "--result-name", "seg_bb"]
+    assert bench.main(args) == 0
+    rows = json.loads((tmp_path / "seg_bb.json").read_text())["rows"]
+    split = json.loads((trained[0] / "split.json").read_text())
+    assert len(rows) == 1 and rows[0]["backbone"] == "resnet18" and rows[0]["timed_images"] == 2
+    assert rows[0]["held_out_images"] == len(split["test"]["keys"])
+    assert 0 <= rows[0]["mask_ap"] <= 100 and rows[0]["ms_per_image"] > 0 and rows[0]["params_m"] > 0
+    assert bench.main(["--runs", str(tmp_path), "--no-result"]) == 2
+    assert "not a segmentation run" in capsys.readouterr().err

@@ -80,6 +80,10 @@ MIN_DETECTION_SCORE = 0.5
 #: curve); the pose stages then apply :data:`MIN_DETECTION_SCORE`.
 DETECTION_SCORE_FLOOR = 0.05
 
+#: Backbones of the segmentation stage's Mask R-CNN (torchvision ResNets, and MobileNetV3 for a lighter network
+#: on a CPU), each with ImageNet weights ``sixdpose fetch-weights`` can put in the local cache.
+SEG_BACKBONES = ("resnet18", "resnet34", "resnet50", "mobilenet_v3_large", "mobilenet_v3_small")
+
 #: Attribution required by the YCB models' CC BY 4.0 licence.
 YCB_ATTRIBUTION = (
     'Object models: "The YCB Object and Model Set" (Calli, Walsman, Singh, Srinivasa, Abbeel, Dollar; '

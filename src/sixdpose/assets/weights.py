@@ -26,10 +26,11 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..constants import SEG_BACKBONES
 from .ycb import AssetError
 
-#: Backbones whose ImageNet weights the segmentation stage can start from (torchvision ResNets).
-BACKBONES = ("resnet18", "resnet34", "resnet50")
+#: Backbones whose ImageNet weights the segmentation stage can start from.
+BACKBONES = SEG_BACKBONES
 _CHUNK = 1 << 20
 _CONTENT_RANGE = re.compile(r"^bytes (\d+)-(\d+)/(\d+|\*)$")
 
@@ -40,9 +41,16 @@ class WeightsError(AssetError):
 
 def imagenet_weights(backbone: str):
     """torchvision's ``IMAGENET1K_V1`` weights enum member of ``backbone`` (one of :data:`BACKBONES`)."""
-    from torchvision.models import ResNet18_Weights, ResNet34_Weights, ResNet50_Weights
+    from torchvision.models import (
+        MobileNet_V3_Large_Weights,
+        MobileNet_V3_Small_Weights,
+        ResNet18_Weights,
+        ResNet34_Weights,
+        ResNet50_Weights,
+    )
 
-    table = {"resnet18": ResNet18_Weights, "resnet34": ResNet34_Weights, "resnet50": ResNet50_Weights}
+    table = {"resnet18": ResNet18_Weights, "resnet34": ResNet34_Weights, "resnet50": ResNet50_Weights,
+             "mobilenet_v3_large": MobileNet_V3_Large_Weights, "mobilenet_v3_small": MobileNet_V3_Small_Weights}
     if backbone not in table:
         raise WeightsError(f"no ImageNet weights known for backbone {backbone!r} (one of {', '.join(BACKBONES)})")
     return table[backbone].IMAGENET1K_V1

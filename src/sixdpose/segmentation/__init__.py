@@ -7,7 +7,7 @@ Stage commands (see :mod:`.cli`)::
     sixdpose eval-seg  --data DIR --masks PRED_DIR [--figures figures/]
 
 Modules: :mod:`.config` (typed config, profiles ``smoke``/``paper``), :mod:`.model` (torchvision Mask
-R-CNN, ResNet-FPN), :mod:`.data` (class map, split, scan of bad annotations, augmentation),
+R-CNN, ResNet- or MobileNetV3-FPN), :mod:`.data` (class map, split, scan of bad annotations, augmentation),
 :mod:`.train` (training loop, checkpoints, resume, DDP, AMP), :mod:`.infer` (inference),
 :mod:`.evaluate` (COCO mask/box AP).
 

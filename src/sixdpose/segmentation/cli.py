@@ -154,8 +154,9 @@ def register(subparsers) -> None:
     """Add ``train-seg``, ``segment`` and ``eval-seg`` to the ``sixdpose`` parser."""
     commands = (  # name, help, description, options, handler
         ("train-seg", "train Mask R-CNN instance segmentation (paper IV-A)",
-         "Train Mask R-CNN (ResNet-FPN) on a dataset's target objects. Profiles: smoke (CPU, minutes) and paper "
-         "(section IV-A). Multi-GPU: run under torchrun.", _train_args, _train_entry),
+         "Train Mask R-CNN (ResNet-FPN; --set backbone=mobilenet_v3_large for a lighter one) on a dataset's target "
+         "objects. Profiles: smoke (CPU, minutes) and paper (section IV-A). Multi-GPU: run under torchrun.",
+         _train_args, _train_entry),
         ("segment", "predict instance masks with a trained Mask R-CNN run",
          "Write PRED_DIR/<scene_id>_<im_id>.npz (masks (N,H,W) bool, labels (N,) obj ids, scores (N,) float32) "
          "per image, and PRED_DIR/coco_results.json.", _segment_args, _cmd_segment),

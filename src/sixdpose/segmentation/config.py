@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 from ..config import bounded, from_profile, path_name
 from ..constants import DETECTION_SCORE_FLOOR
+from ..constants import SEG_BACKBONES as BACKBONES
 from ..training.schedule import TrainSchedule
 
 
@@ -44,11 +45,14 @@ class SegConfig(TrainSchedule):
     """Every setting of a segmentation run (see the module docstring for the named profiles).
 
     Model:
-        backbone: ``resnet50`` (paper), ``resnet34`` or ``resnet18``.
+        backbone: ``resnet50`` (paper), ``resnet34``, ``resnet18``, or ``mobilenet_v3_large`` /
+            ``mobilenet_v3_small`` (torchvision's MobileNetV3 features: a lighter network for a CPU, with
+            the feature pyramid on the last block of each of its stride-4 to stride-32 stages).
         pretrained: initialise the backbone with ImageNet weights if they are in the local torch hub
             cache (never downloaded here; ``sixdpose fetch-weights`` puts them there); otherwise random
             initialisation, said in one line.
-        trainable_layers: backbone stages left trainable (5 = none frozen, as the paper).
+        trainable_layers: backbone stages left trainable, counted from the deepest (5 = none frozen, as
+            the paper; a MobileNet's stages are its stem and its stride-4, -8, -16 and -32 blocks).
         fpn_channels: FPN output channels (torchvision default 256).
         box_head_dim: hidden size of the two-layer box head (torchvision default 1024).
         mask_head_channels: channels of each of the 4 conv layers of the mask head (default 256).
@@ -138,8 +142,6 @@ class SegConfig(TrainSchedule):
             raise ValueError("color_jitter: expected (brightness, contrast, saturation, hue)")
 
 
-#: Backbones the model builder knows (torchvision ResNets; the feature pyramid is built on top).
-BACKBONES = ("resnet18", "resnet34", "resnet50")
 
 #: Named profiles (see the module docstring).
 PROFILES: dict[str, SegConfig] = {

@@ -38,7 +38,6 @@ def build_model(
         ImageNet-initialised backbone keeps its BatchNorm statistics frozen; a randomly initialised one
         trains them (``BatchNorm2d``).
     """
-    import torchvision
     from torchvision.models.detection import MaskRCNN
     from torchvision.models.detection.anchor_utils import AnchorGenerator
     from torchvision.models.detection.backbone_utils import BackboneWithFPN
@@ -68,18 +67,11 @@ def build_model(
     elif init not in ("imagenet", "random"):
         raise ValueError(f"init must be 'imagenet' or 'random', not {init!r}")
     norm_layer = misc_nn_ops.FrozenBatchNorm2d if init == "imagenet" else nn.BatchNorm2d
-    resnet = getattr(torchvision.models, cfg.backbone)(weights=weights, norm_layer=norm_layer)
-
-    layers_to_train = ["layer4", "layer3", "layer2", "layer1", "conv1"][: cfg.trainable_layers]
-    if cfg.trainable_layers == 5:
-        layers_to_train.append("bn1")
-    for name, p in resnet.named_parameters():
-        if not any(name.startswith(layer) for layer in layers_to_train):
-            p.requires_grad_(False)
-    stage2 = resnet.inplanes // 8
-    in_channels = [stage2 * 2 ** (i - 1) for i in (1, 2, 3, 4)]
-    return_layers = OrderedDict((f"layer{k}", str(v)) for v, k in enumerate((1, 2, 3, 4)))
-    backbone = BackboneWithFPN(resnet, return_layers, in_channels, cfg.fpn_channels, extra_blocks=LastLevelMaxPool())
+    if cfg.backbone.startswith("mobilenet"):
+        body, in_channels, return_layers = _mobilenet_body(cfg, weights, norm_layer)
+    else:
+        body, in_channels, return_layers = _resnet_body(cfg, weights, norm_layer)
+    backbone = BackboneWithFPN(body, return_layers, in_channels, cfg.fpn_channels, extra_blocks=LastLevelMaxPool())
 
     n = num_classes + 1
     C = cfg.fpn_channels
@@ -109,6 +101,53 @@ def build_model(
         mask_predictor=mask_predictor,
     )
     return model, init
+
+
+def _resnet_body(cfg: SegConfig, weights, norm_layer) -> tuple[nn.Module, list[int], OrderedDict]:
+    """A torchvision ResNet, its first ``cfg.trainable_layers`` stages from the deepest left trainable, and
+    the channels and names of its four stages (strides 4 to 32) for the feature pyramid."""
+    import torchvision
+
+    resnet = getattr(torchvision.models, cfg.backbone)(weights=weights, norm_layer=norm_layer)
+    layers_to_train = ["layer4", "layer3", "layer2", "layer1", "conv1"][: cfg.trainable_layers]
+    if cfg.trainable_layers == 5:
+        layers_to_train.append("bn1")
+    for name, p in resnet.named_parameters():
+        if not any(name.startswith(layer) for layer in layers_to_train):
+            p.requires_grad_(False)
+    stage2 = resnet.inplanes // 8
+    in_channels = [stage2 * 2 ** (i - 1) for i in (1, 2, 3, 4)]
+    return_layers = OrderedDict((f"layer{k}", str(v)) for v, k in enumerate((1, 2, 3, 4)))
+    return resnet, in_channels, return_layers
+
+
+def _mobilenet_body(cfg: SegConfig, weights, norm_layer) -> tuple[nn.Module, list[int], OrderedDict]:
+    """torchvision's MobileNetV3 features, split into five stages (the stem and the blocks of strides 4, 8,
+    16 and 32, where torchvision marks a block ``_is_cn``); the deepest ``cfg.trainable_layers`` stages are
+    left trainable, and the last block of each of the four strided stages feeds the feature pyramid (the
+    same strides as a ResNet's ``layer1`` to ``layer4``, so the anchors of a profile keep their meaning)."""
+    import torchvision
+
+    features = getattr(torchvision.models, cfg.backbone)(weights=weights, norm_layer=norm_layer).features
+    starts = [i for i, block in enumerate(features) if getattr(block, "_is_cn", False)]
+    if len(starts) != 4:  # torchvision's layout (strides 4, 8, 16, 32) changed under us
+        raise ValueError(f"backbone: {cfg.backbone} has {len(starts)} strided stages, expected 4")
+    first_trainable = ([0] + starts)[5 - cfg.trainable_layers] if cfg.trainable_layers else len(features)
+    for block in features[:first_trainable]:
+        for p in block.parameters():
+            p.requires_grad_(False)
+    ends = [s - 1 for s in starts[1:]] + [len(features) - 1]
+    in_channels = [_out_channels(features[i]) for i in ends]
+    return_layers = OrderedDict((str(i), str(v)) for v, i in enumerate(ends))
+    return features, in_channels, return_layers
+
+
+def _out_channels(block: nn.Module) -> int:
+    """Output channels of a MobileNetV3 block (an inverted residual, or the last 1x1 conv-norm-activation)."""
+    if hasattr(block, "out_channels"):
+        return int(block.out_channels)
+    convs = [m for m in block.modules() if isinstance(m, nn.Conv2d)]
+    return int(convs[-1].out_channels)
 
 
 def set_train_sizes(model: nn.Module, cfg: SegConfig, training: bool) -> None:
