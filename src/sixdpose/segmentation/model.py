@@ -144,8 +144,9 @@ def _mobilenet_body(cfg: SegConfig, weights, norm_layer) -> tuple[nn.Module, lis
 
 def _out_channels(block: nn.Module) -> int:
     """Output channels of a MobileNetV3 block (an inverted residual, or the last 1x1 conv-norm-activation)."""
-    if hasattr(block, "out_channels"):
-        return int(block.out_channels)
+    out = getattr(block, "out_channels", None)
+    if isinstance(out, int):
+        return out
     convs = [m for m in block.modules() if isinstance(m, nn.Conv2d)]
     return int(convs[-1].out_channels)
 
