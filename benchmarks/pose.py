@@ -25,6 +25,8 @@ Usage::
 * With ``--seg SEG_RUN --data DIR`` (trained runs): end-to-end FPS on the dataset's first ``--frames``
   real frames, loaded into memory first: Mask R-CNN on the RGB image, then the pose network and 2
   refinement iterations on every detection of the frame in one batch (section V-A: disk reads excluded).
+  Mask R-CNN keeps only the detections the pose stage uses (score >= ``MIN_DETECTION_SCORE``): the pose
+  stage's poses are the same, and no mask is pasted for a detection it would drop.
 * With ``--seg-profile PROFILE --data DIR`` instead (no trained segmentation run at hand, e.g. on a lent GPU
   machine): end-to-end FPS with an untrained Mask R-CNN of that segmentation profile's architecture, made to
   return as many detections as the frame has objects (score threshold 0, ``detections_per_img`` = the
@@ -238,8 +240,9 @@ def end_to_end_fps(seg, pose, refiner, data, device, frames: int, untrained: boo
         def run(sample):
             out = segms[max(len(sample.instances), 1)].predict([sample.rgb])[0]
             return est.predict(sample), len(out["labels"])
-    else:
-        segm = Segmenter(seg, device=str(device))
+    else:  # detections below the pose stage's score are dropped before their masks are pasted: the estimator
+        # ignores them anyway, and a box kept by the score floor is never suppressed by a lower-scored one
+        segm = Segmenter(seg, device=str(device), score_thresh=est.score_thresh)
 
         def run(sample):
             out = segm.predict([sample.rgb])[0]
@@ -254,6 +257,8 @@ def end_to_end_fps(seg, pose, refiner, data, device, frames: int, untrained: boo
            "e2e_detections_per_frame": sum(n_det) / max(len(times), 1), "e2e_frames": len(times)}
     if untrained:
         res["e2e_segmentation"] = "untrained, detections fixed to the frame's objects; pose on GT masks"
+    else:
+        res["e2e_segmentation"] = f"{segm.cfg.backbone}, detections scoring >= {est.score_thresh:g}"
     return res
 
 
