@@ -13,9 +13,9 @@ For each trained segmentation run (``sixdpose train-seg``):
   hold out the same images, which is checked) and pycocotools scores them (COCO mask and box AP, AP50), as
   ``sixdpose eval-seg`` does; no test split is used to compare or choose;
 * **time**: ``Segmenter.predict`` on the first ``--frames`` images of ``--time-data`` (loaded into memory
-  first; one warm-up image untimed), keeping the detections the pose stage uses (score >=
-  ``MIN_DETECTION_SCORE``), as the end-to-end timing of ``benchmarks/pose.py`` does: milliseconds per image
-  and detections per image;
+  first; the first also run once untimed, as ``benchmarks/segmentation.py`` times them), keeping the
+  detections the pose stage uses (score >= ``MIN_DETECTION_SCORE``), as the end-to-end timing of
+  ``benchmarks/pose.py`` does: milliseconds per image and detections per image;
 * the backbone, its parameters and those of the whole network.
 
 One row per run is printed and written as the result artifact ``results/<name>.json`` (+ ``.csv``).
@@ -27,7 +27,6 @@ import argparse
 import json
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
@@ -49,25 +48,27 @@ def held_out_ap(run: Path, data: str, tmp: Path) -> dict:
 
 
 def time_per_image(run: Path, data: str, frames: int) -> dict:
-    """Milliseconds per image of ``Segmenter.predict`` (detections scoring >= ``MIN_DETECTION_SCORE``)."""
+    """Milliseconds per image of ``Segmenter.predict`` (detections scoring >= ``MIN_DETECTION_SCORE``), timed by
+    ``benchmarks/segmentation.py``'s :func:`bench_device` (one image per call, the first also run untimed)."""
+    import importlib.util
+
     from sixdpose.constants import MIN_DETECTION_SCORE
     from sixdpose.datasets import as_reader
     from sixdpose.segmentation.infer import Segmenter
 
+    spec = importlib.util.spec_from_file_location("_bench_segmentation", Path(__file__).with_name("segmentation.py"))
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
     path, _, split = data.partition("@")
     reader = as_reader(path, split=split or "test")
-    rgbs = [reader.load(k, masks=False).rgb for k in reader.keys()[: frames + 1]]
+    rgbs = [reader.load(k, masks=False).rgb for k in reader.keys()[:frames]]
     seg = Segmenter(run, device="cpu", score_thresh=MIN_DETECTION_SCORE)
-    seg.predict(rgbs[:1])  # warm-up
-    n_det, t0 = 0, time.perf_counter()
-    for rgb in rgbs[1:]:
-        n_det += len(seg.predict([rgb])[0]["labels"])
-    dt = (time.perf_counter() - t0) / max(len(rgbs) - 1, 1)
+    timing = bench.bench_device(seg, rgbs, batch_size=1, warmup=1)
     body = seg.model.backbone.body
     return {"backbone": seg.cfg.backbone, "backbone_params_m": sum(p.numel() for p in body.parameters()) / 1e6,
-            "params_m": sum(p.numel() for p in seg.model.parameters()) / 1e6, "ms_per_image": 1000 * dt,
-            "images_per_s": 1.0 / dt if dt > 0 else float("inf"),
-            "detections_per_image": n_det / max(len(rgbs) - 1, 1), "timed_images": len(rgbs) - 1}
+            "params_m": sum(p.numel() for p in seg.model.parameters()) / 1e6,
+            "ms_per_image": timing["ms_per_image"], "images_per_s": timing["images_per_s"],
+            "detections_per_image": timing["detections"] / max(timing["images"], 1), "timed_images": timing["images"]}
 
 
 def main(argv=None) -> int:
@@ -76,7 +77,7 @@ def main(argv=None) -> int:
     ap.add_argument("--runs", nargs="+", required=True, help="segmentation run directories (train-seg --out)")
     ap.add_argument("--data", default="data/train", help="the runs' training data (their held-out images are scored)")
     ap.add_argument("--time-data", default="data/test", help="DIR[@SPLIT] whose first --frames images are timed")
-    ap.add_argument("--frames", type=int, default=20, help="images timed per run (after one untimed)")
+    ap.add_argument("--frames", type=int, default=20, help="images timed per run")
     ap.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
     add_result_arguments(ap, "seg_backbones_cpu", Path(__file__).resolve().parents[1] / "results")
     args = ap.parse_args(argv)

@@ -142,7 +142,6 @@ class SegConfig(TrainSchedule):
             raise ValueError("color_jitter: expected (brightness, contrast, saturation, hue)")
 
 
-
 #: Named profiles (see the module docstring).
 PROFILES: dict[str, SegConfig] = {
     "paper": SegConfig(profile="paper"),
