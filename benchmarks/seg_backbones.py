@@ -32,6 +32,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
 from sixdpose.artifacts.results import add_result_arguments, save_from_args, script_command  # noqa: E402
+from sixdpose.options import Int  # noqa: E402
 
 
 def held_out_ap(run: Path, data: str, tmp: Path) -> dict:
@@ -77,8 +78,8 @@ def main(argv=None) -> int:
     ap.add_argument("--runs", nargs="+", required=True, help="segmentation run directories (train-seg --out)")
     ap.add_argument("--data", default="data/train", help="the runs' training data (their held-out images are scored)")
     ap.add_argument("--time-data", default="data/test", help="DIR[@SPLIT] whose first --frames images are timed")
-    ap.add_argument("--frames", type=int, default=20, help="images timed per run")
-    ap.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
+    ap.add_argument("--frames", type=Int(1, 100_000), default=20, help="images timed per run")
+    ap.add_argument("--threads", type=Int(0, 1024), default=0, help="torch CPU threads (0: torch's default)")
     add_result_arguments(ap, "seg_backbones_cpu", Path(__file__).resolve().parents[1] / "results")
     args = ap.parse_args(argv)
     import torch

@@ -182,7 +182,7 @@ def test_hybrid_runner_reads_segment_output(seg_data, trained, predicted, tmp_pa
 @pytest.mark.slow
 def test_the_backbone_benchmark_scores_held_out_images_and_times_them(seg_data, trained, tmp_path, capsys):
     """benchmarks/seg_backbones.py: one row per run with its held-out images' AP and its time per image; the
-    result artifact is written; a directory that is not a run is refused with exit status 2."""
+    result artifact is written; a directory that is not a run, or --frames 0, is refused with exit status 2."""
     import importlib.util
     from pathlib import Path
 
@@ -201,3 +201,6 @@ def test_the_backbone_benchmark_scores_held_out_images_and_times_them(seg_data, 
     assert 0 <= rows[0]["mask_ap"] <= 100 and rows[0]["ms_per_image"] > 0 and rows[0]["params_m"] > 0
     assert bench.main(["--runs", str(tmp_path), "--no-result"]) == 2
     assert "not a segmentation run" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as bad:
+        bench.main(["--runs", run, "--frames", "0", "--no-result"])
+    assert bad.value.code == 2 and "--frames: 0 is out of range" in capsys.readouterr().err
