@@ -4,6 +4,8 @@ import importlib.util
 import json
 from pathlib import Path
 
+import pytest
+
 from test_reg_helpers import write_synthetic_dataset
 
 REPO = Path(__file__).resolve().parents[1]
@@ -34,3 +36,32 @@ def test_seg_profile_times_segmentation_and_pose_on_every_frame(tmp_path, capsys
     assert bench.main(args + ["--seg", str(tmp_path)]) == 2
     assert bench.main(["--pose", str(pose), "--seg-profile", "smoke", "--no-result"]) == 2
     assert "--seg/--seg-profile need --data" in capsys.readouterr().err
+
+
+def test_repeats_report_the_median_pass_and_the_spread(tmp_path, capsys):
+    """--repeats N times N passes over the frames and reports the median pass with the slowest and fastest;
+    --repeats 0 is refused with exit status 2; median_pass picks the pass of median mean."""
+    bench = _bench()
+    data = write_synthetic_dataset(tmp_path / "d", n_images=3)
+    pose, _ = bench.fake_runs("smoke", tmp_path, classes=16, head="dense", appearance="local")
+    out = tmp_path / "out.json"
+    args = ["--profile", "smoke", "--pose", str(pose), "--data", str(data), "--seg-profile", "smoke",
+            "--frames", "2", "--steps", "1", "--no-result", "--json", str(out), "--repeats", "3"]
+    assert bench.main(args) == 0
+    fig = json.loads(out.read_text())
+    assert fig["e2e_passes"] == fig["infer_passes"] == 3
+    assert fig["e2e_fps_min"] <= fig["e2e_fps"] <= fig["e2e_fps_max"]
+    assert fig["infer_fps_min"] <= fig["infer_fps"] <= fig["infer_fps_max"]
+    with pytest.raises(SystemExit) as e:
+        bench.main(args[:-1] + ["0"])
+    assert e.value.code == 2 and "--repeats" in capsys.readouterr().err
+
+    import torch
+
+    clock = iter([0.0, 3.0, 3.0, 4.0, 4.0, 6.0])  # passes of 3, 1 and 2 s: the median is the 2 s one
+    bench.time.perf_counter, real = (lambda: next(clock)), bench.time.perf_counter
+    try:
+        times, means = bench.median_pass(lambda x: None, [0], torch.device("cpu"), 3)
+    finally:
+        bench.time.perf_counter = real
+    assert times == [2.0] and means == [3.0, 1.0, 2.0]

@@ -260,3 +260,57 @@ def test_pretrained_weights_come_from_local_cache(monkeypatch, tmp_path):
     body = model.backbone.body.state_dict()
     assert torch.equal(body["conv1.weight"], ref["conv1.weight"])
     assert torch.equal(body["layer4.1.conv2.weight"], ref["layer4.1.conv2.weight"])
+
+
+@pytest.mark.parametrize("backbone", ["resnet18", "mobilenet_v3_large"])
+def test_compiled_backbone_gives_the_eager_detections_at_other_sizes(backbone):
+    """``optimise_backbone`` swaps in a frozen TorchScript body whose pyramid equals the eager one on an image
+    size and batch other than the one it was traced at, so the detections do not change."""
+    import copy
+
+    from sixdpose.segmentation.infer import optimise_backbone
+    from sixdpose.segmentation.model import build_model
+
+    cfg = profile_config("smoke", backbone=backbone, score_thresh=0.0)
+    torch.manual_seed(0)
+    eager, _ = build_model(cfg, 3)
+    eager.eval()
+    compiled = copy.deepcopy(eager)
+    assert optimise_backbone(compiled, cfg)
+    assert type(compiled.backbone).__name__ == "_TracedBackbone"
+    assert compiled.backbone.out_channels == eager.backbone.out_channels
+    x = torch.rand(2, 3, 160, 224, generator=torch.Generator().manual_seed(1))
+    with torch.no_grad():
+        a, b = eager.backbone(x), compiled.backbone(x)
+        assert list(a) == list(b)
+        for k in a:
+            assert a[k].shape == b[k].shape and torch.allclose(a[k], b[k], atol=1e-4)
+        da, db = eager(list(x)), compiled(list(x))
+    for u, v in zip(da, db, strict=True):
+        assert torch.equal(u["labels"], v["labels"]) and torch.allclose(u["boxes"], v["boxes"], atol=1e-2)
+
+
+def test_a_compiled_backbone_that_disagrees_is_not_used(monkeypatch, caplog):
+    """When the compiled body's features differ from the eager ones, the eager body is kept, with a warning."""
+    from sixdpose.segmentation.infer import optimise_backbone
+    from sixdpose.segmentation.model import build_model
+
+    cfg = profile_config("smoke")
+    model, _ = build_model(cfg, 3)
+    model.eval()
+    eager = model.backbone
+
+    class Off(torch.nn.Module):
+        def __init__(self, m):
+            super().__init__()
+            self.m = m
+
+        def forward(self, x):
+            return {k: v + 1.0 for k, v in self.m(x).items()}
+
+    real = torch.jit.optimize_for_inference
+    monkeypatch.setattr(torch.jit, "optimize_for_inference", lambda m: Off(real(m)))
+    with caplog.at_level(logging.WARNING, logger="sixdpose"):
+        assert not optimise_backbone(model, cfg)
+    assert model.backbone is eager
+    assert "not compiled" in caplog.text

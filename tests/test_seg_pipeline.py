@@ -157,6 +157,21 @@ def test_segmenter_batched_equals_single(seg_data, trained):
     assert not math.isnan(float(seg.cfg.score_thresh))
 
 
+def test_segmenter_compiles_its_backbone_on_the_cpu_without_changing_the_masks(seg_data, trained):
+    """On the CPU the Segmenter runs a compiled backbone unless told not to; the predictions are the eager ones."""
+    from sixdpose.datasets import open_dataset
+    from sixdpose.segmentation import Segmenter
+
+    fast, eager = Segmenter(trained[0], device="cpu"), Segmenter(trained[0], device="cpu", optimise=False)
+    assert fast.optimised and not eager.optimised
+    rgbs = [s.rgb for s in list(open_dataset(seg_data))[:3]]
+    for a, b in zip(fast.predict(rgbs), eager.predict(rgbs), strict=True):
+        assert np.array_equal(a["labels"], b["labels"])
+        assert np.allclose(a["scores"], b["scores"], atol=1e-4)
+        assert a["masks"].shape == b["masks"].shape
+        assert (a["masks"] != b["masks"]).sum() <= 0.001 * max(a["masks"].size, 1)
+
+
 @pytest.mark.slow
 @pytest.mark.filterwarnings("ignore::DeprecationWarning")
 def test_hybrid_runner_reads_segment_output(seg_data, trained, predicted, tmp_path):
@@ -204,3 +219,30 @@ def test_the_backbone_benchmark_scores_held_out_images_and_times_them(seg_data, 
     with pytest.raises(SystemExit) as bad:
         bench.main(["--runs", run, "--frames", "0", "--no-result"])
     assert bad.value.code == 2 and "--frames: 0 is out of range" in capsys.readouterr().err
+
+
+def test_the_compile_benchmark_times_both_variants_and_finds_the_same_detections(seg_data, trained, tmp_path):
+    """benchmarks/seg_compile.py: an eager and a compiled row, end to end with an (untrained) dense head, the
+    detections found the same; the result artifact is written; --passes 0 is refused with exit status 2."""
+    import importlib.util
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "benchmarks"
+    mods = {}
+    for name in ("seg_compile", "pose"):
+        spec = importlib.util.spec_from_file_location(f"bench_{name}", root / f"{name}.py")
+        mods[name] = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mods[name])
+    pose, _ = mods["pose"].fake_runs("smoke", tmp_path, classes=16, head="dense", appearance="local")
+    args = ["--seg", str(trained[0]), "--pose", str(pose), "--data", str(seg_data), "--frames", "2",
+            "--passes", "2", "--results-dir", str(tmp_path), "--result-name", "seg_cmp"]
+    assert mods["seg_compile"].main(args) == 0
+    rows = json.loads((tmp_path / "seg_cmp.json").read_text())["rows"]
+    assert [r["variant"] for r in rows] == ["eager", "compiled"]
+    for r in rows:
+        assert r["same_detections"] is True and r["passes"] == 2 and r["frames"] == 2
+        assert r["seg_ms"] > 0 and r["pose_ms"] > 0 and r["e2e_fps_min"] <= r["e2e_fps_max"]
+        assert r["e2e_fps"] == pytest.approx(1000 / (r["seg_ms"] + r["pose_ms"]))
+    with pytest.raises(SystemExit) as bad:
+        mods["seg_compile"].main(args[:-6] + ["--passes", "0", "--no-result"])
+    assert bad.value.code == 2

@@ -276,6 +276,28 @@ def _ycbv_synthetic_to_real_per_object(src: Source) -> str:
     return md_table(["obj_id", "object", "GT instances", *[c for c, _ in cols]], rows)
 
 
+#: End to end on the 2-core CPU (``benchmarks/pose.py --seg RUN --data data/test --frames 40``, session 23):
+#: (segmenter label, result); a row is shown where its result exists.
+E2E_CPU = [
+    ("ResNet-18 (the `cpu` profile's), compiled", "pose_cpu_dense_local_test40_segresnet18_cpu"),
+    ("MobileNetV3-Large, 4 epochs, compiled", "pose_cpu_dense_local_test40_segmbv3le4_cpu"),
+    ("MobileNetV3-Small, 2 epochs, compiled", "pose_cpu_dense_local_test40_segmbv3s_cpu"),
+]
+
+
+def _e2e_cpu(src: Source) -> str:
+    rows = []
+    for label, name in E2E_CPU:
+        if src.exists(name):
+            f = src(name).figures
+            rows.append([label, f["e2e_fps"], f.get("e2e_fps_min"), f.get("e2e_fps_max"), f["e2e_ms_per_frame"],
+                         f["e2e_detections_per_frame"], f["infer_ms_per_frame"], f["infer_instances_per_frame"],
+                         f["e2e_frames"], f.get("e2e_passes", 1)])
+    return md_table(["Mask R-CNN backbone", "end to end FPS (median pass)", "slowest pass FPS", "fastest pass FPS",
+                     "ms per frame", "detections per frame (score >= 0.5)", "pose stage alone, GT masks: ms per frame",
+                     "GT instances per frame", "frames", "passes"], rows)
+
+
 #: Curated README blocks: marker name -> renderer.
 BLOCKS = {
     "ycbv_synthetic_to_real": _ycbv_synthetic_to_real,
@@ -285,6 +307,7 @@ BLOCKS = {
     "depth_noise": _depth_noise,
     "hybrid_cpu_test": _hybrid_cpu_test,
     "ycbv_bop": _ycbv_bop,
+    "e2e_cpu": _e2e_cpu,
 }
 
 
