@@ -111,9 +111,8 @@ def main(argv=None) -> int:
         torch.set_num_threads(args.threads)
     rows, agree = compare(args.seg, args.pose, args.data, args.frames, args.passes)
     for r in rows:
-        print(json.dumps({**r, "same_detections": agree}))
-    for r in rows:
         r["same_detections"] = agree
+        print(json.dumps(r))
     save_from_args(args, rows, command=script_command(__file__, argv),
                    units={"seg_ms": "ms", "pose_ms": "ms", "e2e_ms": "ms", "e2e_fps": "frames/s",
                           "e2e_fps_min": "frames/s", "e2e_fps_max": "frames/s"},

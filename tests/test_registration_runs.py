@@ -266,3 +266,55 @@ def test_onboarding_is_timed_apart_from_the_images(syn, tmp_path, capsys):
     saved = yaml.safe_load(out.with_name("r.config.yml").read_text())
     assert saved["onboarding_s"] > 0 and saved["verify"] is True
     assert "onboarding" in capsys.readouterr().out
+
+
+def test_a_stopped_run_resumes_from_its_journal(syn, tmp_path, monkeypatch, caplog):
+    """A run stopped after its first image leaves ``<out>.journal``; the same command then registers only the
+    other images and writes the CSV an uninterrupted run writes (times included: the journal keeps them),
+    and removes the journal. Other arguments, a cut-short last line and ``--no-resume`` start over."""
+    from sixdpose.artifacts.journal import journal_path
+    from sixdpose.registration import runner
+
+    full = tmp_path / "full.csv"
+    args = ["--method", "ransac", "--icp", "--profile", "fast", "--workers", "1", "--no-progress"]
+    assert main(["register", "--data", str(syn), *args, "--out", str(full)]) == 0
+    assert not journal_path(full).exists()
+
+    out = tmp_path / "r.csv"
+    real = runner.process_image
+    calls: list[int] = []
+
+    def stop_at_second(i):
+        calls.append(i)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(i)
+
+    monkeypatch.setattr(runner, "process_image", stop_at_second)
+    assert main(["register", "--data", str(syn), *args, "--out", str(out)]) == 130  # as Ctrl-C
+    assert not out.exists() and journal_path(out).is_file()
+    first_journal = journal_path(out).read_text()
+    assert len(first_journal.splitlines()) == 2  # the header and image 0
+
+    calls.clear()
+    monkeypatch.setattr(runner, "process_image", lambda i: (calls.append(i), real(i))[1])
+    with caplog.at_level("WARNING"):
+        assert main(["register", "--data", str(syn), *args, "--out", str(out)]) == 0
+    assert calls == [1, 2]  # image 0 came from the journal
+    assert "resuming: 1 image(s) already done" in caplog.text
+    assert results_without_time(out) == results_without_time(full)
+    assert not journal_path(out).exists()
+
+    # a journal of other arguments is not used; a cut-short line is run again; --no-resume starts over
+    journal_path(out).write_text(first_journal.replace('"icp": true', '"icp": false'))
+    calls.clear()
+    assert main(["register", "--data", str(syn), *args, "--out", str(out)]) == 0
+    assert calls == [0, 1, 2]
+    journal_path(out).write_text(first_journal[:-20])
+    calls.clear()
+    assert main(["register", "--data", str(syn), *args, "--out", str(out)]) == 0
+    assert calls == [0, 1, 2] and results_without_time(out) == results_without_time(full)
+    journal_path(out).write_text(first_journal)
+    calls.clear()
+    assert main(["register", "--data", str(syn), *args, "--no-resume", "--out", str(out)]) == 0
+    assert calls == [0, 1, 2] and not journal_path(out).exists()

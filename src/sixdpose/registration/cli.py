@@ -37,12 +37,32 @@ def register(sub) -> None:
         help="with predicted masks, skip detections whose score is below this (default %(default)s)",
     )
     O.add(p, "--no-progress")
+    p.add_argument("--no-resume", dest="resume", action="store_false",
+                   help="ignore the journal <out>.journal of a stopped run with the same arguments and start over "
+                        "(by default the images it holds are not registered again)")
     p.set_defaults(func=_run)
+
+
+def run_fingerprint(args, cfg, ds) -> dict:
+    """What names a ``register`` run for its journal (:mod:`sixdpose.artifacts.journal`): the method, the
+    settings, the dataset, the masks (with a hash of a predicted-mask directory's ``meta.json``, which a new
+    segmentation rewrites) and the images."""
+    import hashlib
+    from pathlib import Path
+
+    meta = Path(args.masks) / "meta.json" if args.masks != "gt" else None
+    return {"command": "register", "method": args.method, "icp": bool(args.icp), "config": cfg.to_dict(),
+            "data": str(Path(ds.location).resolve()), "split": args.split, "n_images": len(ds),
+            "masks": str(args.masks),
+            "masks_meta_sha256": hashlib.sha256(meta.read_bytes()).hexdigest() if meta and meta.is_file() else None,
+            "limit": args.limit or None, "stride": args.stride, "min_px": args.min_px,
+            "score_thresh": args.score_thresh}
 
 
 def _run(args) -> int:
     from pathlib import Path
 
+    from ..artifacts.journal import ImageJournal, journal_path
     from ..artifacts.poses import RESULTS_HEADER, write_results, write_results_config
     from ..artifacts.tables import write_table
     from ..datasets.readers import open_dataset
@@ -65,12 +85,16 @@ def _run(args) -> int:
     indices = range(0, len(ds), args.stride) if args.stride > 1 else None
     failures: list = []
     timing: dict = {}
+    # a stopped run leaves <out>.journal; the same command resumes from it (sixdpose.artifacts.journal)
+    journal = ImageJournal(journal_path(out), run_fingerprint(args, cfg, ds), resume=args.resume)
     rows = run_registration(ds, args.method, icp=args.icp, masks=args.masks, cfg=cfg, workers=args.workers,
                             limit=args.limit or None, min_px=args.min_px, min_score=args.score_thresh,
-                            progress=not args.no_progress, indices=indices, failures=failures, timing=timing)
+                            progress=not args.no_progress, indices=indices, failures=failures, timing=timing,
+                            journal=journal)
     write_results(rows, out)
     # the config, and the objects' onboarding seconds that the CSV's per-image times leave out
     write_results_config(out, {**cfg.to_dict(), "onboarding_s": round(timing.get("onboarding_s", 0.0), 3)})
+    journal.remove()  # its rows are in the CSV now
     n_bad = sum(1 for r in rows if r.reason)
     msg = f"wrote {len(rows)} estimates ({n_bad} with score 0) to {out}"
     if timing.get("onboarding_s"):

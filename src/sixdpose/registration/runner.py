@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..artifacts.journal import ImageJournal
 from ..artifacts.poses import PoseEstimate
 from ..artifacts.predictions import check_predictions_dataset, read_predictions
 from ..constants import MIN_DETECTION_SCORE
@@ -284,6 +285,7 @@ def run_registration(
     indices=None,
     failures: list | None = None,
     timing: dict | None = None,
+    journal: ImageJournal | None = None,
 ) -> list[PoseEstimate]:
     """Register every instance of every image of ``data`` (a synthetic or BOP dataset).
 
@@ -303,6 +305,10 @@ def run_registration(
             read (corrupt RGB/depth/mask files or predictions); such images are logged and skipped.
         timing: if a dict, receives ``onboarding_s``: the seconds all processes spent onboarding objects
             (building their model-side data on first use), which the rows' per-image ``time`` leaves out.
+        journal: an :class:`~sixdpose.artifacts.journal.ImageJournal` (not yet opened): the images it
+            already holds are taken from it, not registered again, and every image finished here is added
+            to it as it finishes, so a stopped run resumes (``register`` keeps it beside ``--out``). It is
+            left open for the caller to remove once the results are written (or closed on an error).
     Returns:
         one :class:`~sixdpose.artifacts.poses.PoseEstimate` per instance (per prediction with
         predicted masks), in image order.
@@ -323,44 +329,36 @@ def run_registration(
     if limit is not None:
         idx = idx[:limit]
     args = (ds, method, icp, cfg, str(masks), int(min_px), float(min_score))
+    done: dict[int, tuple] = {}
+    if journal is not None:
+        done = {i: journal.done[i] for i in idx if i in journal.done}
+        journal.done = dict(done)  # entries of other images are not kept
+        journal.open()
+    pending = [i for i in idx if i not in done]
+    bar = tqdm(total=len(idx), initial=len(done), desc=f"register {method}{'+icp' if icp else ''}", unit="img",
+               disable=not progress)
+
+    def finished(i: int, out: tuple) -> None:
+        done[i] = out
+        if journal is not None:
+            journal.add(i, *out)
+        bar.update()
+
+    try:
+        _register_pending(args, pending, workers, finished)
+    finally:
+        bar.close()
+        if journal is not None:
+            journal.close()
     rows: list[PoseEstimate] = []
     bad_images: list[tuple] = []
     onboarding = 0.0
-    bar = tqdm(total=len(idx), desc=f"register {method}{'+icp' if icp else ''}", unit="img", disable=not progress)
-    if workers <= 1 or len(idx) <= 1:
-        _init_worker(*args)
-        with _one_thread():
-            for i in idx:
-                r, fail, onb = process_image(i)
-                onboarding += onb
-                rows.extend(r)
-                if fail:
-                    bad_images.append(fail)
-                bar.update()
-    else:
-        from ..workers import process_pool
-
-        # one thread per worker (Open3D: set_max_threads in the initializer; OpenMP, BLAS: the
-        # environment, which spawned children inherit)
-        saved = {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
-        for k in saved:
-            os.environ[k] = "1"
-        try:
-            # leaving the block by an exception (also KeyboardInterrupt) terminates the workers
-            with process_pool(workers, _init_pool_worker, args) as pool:
-                for r, fail, onb in pool.imap(process_image, idx, chunksize=1):
-                    onboarding += onb
-                    rows.extend(r)
-                    if fail:
-                        bad_images.append(fail)
-                    bar.update()
-        finally:
-            for k, v in saved.items():
-                if v is None:
-                    os.environ.pop(k, None)
-                else:
-                    os.environ[k] = v
-    bar.close()
+    for i in idx:
+        r, fail, onb = done[i]
+        rows.extend(r)
+        onboarding += onb
+        if fail:
+            bad_images.append(tuple(fail))
     n_fail = sum(1 for r in rows if r.reason)
     if n_fail:
         log.warning("%d of %d instances had unusable input or failed (score 0)", n_fail, len(rows))
@@ -371,3 +369,34 @@ def run_registration(
     if timing is not None:
         timing["onboarding_s"] = onboarding
     return rows
+
+
+def _register_pending(args: tuple, pending: list[int], workers: int, finished) -> None:
+    """Register images ``pending`` (indices) in this process (``workers <= 1``) or a pool, calling
+    ``finished(i, (rows, failure, onboarding_s))`` for each in order as it completes."""
+    if not pending:
+        return
+    if workers <= 1 or len(pending) <= 1:
+        _init_worker(*args)
+        with _one_thread():
+            for i in pending:
+                finished(i, process_image(i))
+        return
+    from ..workers import process_pool
+
+    # one thread per worker (Open3D: set_max_threads in the initializer; OpenMP, BLAS: the
+    # environment, which spawned children inherit)
+    saved = {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+    for k in saved:
+        os.environ[k] = "1"
+    try:
+        # leaving the block by an exception (also KeyboardInterrupt) terminates the workers
+        with process_pool(workers, _init_pool_worker, args) as pool:
+            for i, out in zip(pending, pool.imap(process_image, pending, chunksize=1), strict=True):
+                finished(i, out)
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
