@@ -387,6 +387,8 @@ RAW_WRITE_ALLOWED = {
     ("assets/weights.py", "_stream"): "streams a download into <file>.part (resumable), checked by fetch_weights "
                                       "and moved into place with os.replace",
     ("assets/bop.py", "convert_bop_model"): "writes a mkdtemp directory that os.replace moves into place",
+    ("artifacts/journal.py", "_open_for_append"): "append-only journal of a batch run (one synced line per "
+                                                 "finished image; its header is written by atomic_write_text)",
     ("generation/writer.py", "commit_scene"): "writes the scene's staging directory, then os.replace per file",
 }
 

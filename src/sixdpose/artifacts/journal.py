@@ -24,6 +24,7 @@ from typing import TextIO
 
 import numpy as np
 
+from ..fileio import atomic_write_text
 from .poses import PoseEstimate
 
 log = logging.getLogger(__name__)
@@ -100,18 +101,16 @@ class ImageJournal:
             log.warning("%s: resuming: %d image(s) already done", self.path, len(self.done))
 
     def open(self) -> ImageJournal:
-        """Start writing: rewrite the file with the header and the entries kept in :attr:`done`."""
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.path.with_name(self.path.name + ".tmp")
-        with open(tmp, "w", encoding="utf-8") as f:
-            f.write(json.dumps({"kind": JOURNAL_KIND, "fingerprint": self.fingerprint}) + "\n")
-            for i, (rows, fail, onb) in sorted(self.done.items()):
-                f.write(self._line(i, rows, fail, onb))
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, self.path)
-        self._f = open(self.path, "a", encoding="utf-8")  # noqa: SIM115 (closed by close/remove)
+        """Start writing: rewrite the file atomically with the header and the entries kept in :attr:`done`."""
+        lines = [json.dumps({"kind": JOURNAL_KIND, "fingerprint": self.fingerprint}) + "\n"]
+        lines += [self._line(i, rows, fail, onb) for i, (rows, fail, onb) in sorted(self.done.items())]
+        atomic_write_text(self.path, "".join(lines))
+        self._f = self._open_for_append()
         return self
+
+    def _open_for_append(self) -> TextIO:
+        """The journal opened for appending (each :meth:`add` flushes and syncs its line)."""
+        return open(self.path, "a", encoding="utf-8")  # noqa: SIM115 (closed by close/remove)
 
     @staticmethod
     def _line(i: int, rows, fail, onb: float) -> str:
