@@ -270,8 +270,9 @@ def test_onboarding_is_timed_apart_from_the_images(syn, tmp_path, capsys):
 
 def test_a_stopped_run_resumes_from_its_journal(syn, tmp_path, monkeypatch, caplog):
     """A run stopped after its first image leaves ``<out>.journal``; the same command then registers only the
-    other images and writes the CSV an uninterrupted run writes (times included: the journal keeps them),
-    and removes the journal. Other arguments, a cut-short last line and ``--no-resume`` start over."""
+    other images and writes the rows an uninterrupted run writes (times aside: those of the finished images
+    come from the journal), and removes the journal. Other arguments, a cut-short last line and ``--no-resume``
+    start over."""
     from sixdpose.artifacts.journal import journal_path
     from sixdpose.registration import runner
 

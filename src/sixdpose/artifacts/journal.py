@@ -6,7 +6,7 @@ every further line holds one finished image (its index, its :class:`~sixdpose.ar
 rows with their reasons, whether it could be read, its onboarding seconds). Each line is flushed and
 synced to disk before the next image, so a run killed at any point (Ctrl-C, the session's end, a lost
 machine) loses at most the images in flight. Run again with the same arguments, the run reads the journal,
-skips the images it holds and registers the rest; the CSV it then writes is the one an uninterrupted run
+skips the images it holds and registers the rest; the CSV it then writes has the rows an uninterrupted run
 writes (the rows are stored exactly: JSON keeps every float's digits, and the instances' seeds do not
 depend on the order of the images). Once the CSV is written the journal is deleted.
 
@@ -100,8 +100,12 @@ class ImageJournal:
         if self.done:
             log.warning("%s: resuming: %d image(s) already done", self.path, len(self.done))
 
-    def open(self) -> ImageJournal:
-        """Start writing: rewrite the file atomically with the header and the entries kept in :attr:`done`."""
+    def open(self, keep=None) -> ImageJournal:
+        """Start writing: rewrite the file atomically with the header and the entries of :attr:`done`, only
+        those of the image indices ``keep`` when it is given (the images of this run)."""
+        if keep is not None:
+            keep = set(keep)
+            self.done = {i: v for i, v in self.done.items() if i in keep}
         lines = [json.dumps({"kind": JOURNAL_KIND, "fingerprint": self.fingerprint}) + "\n"]
         lines += [self._line(i, rows, fail, onb) for i, (rows, fail, onb) in sorted(self.done.items())]
         atomic_write_text(self.path, "".join(lines))

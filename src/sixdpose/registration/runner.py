@@ -331,9 +331,8 @@ def run_registration(
     args = (ds, method, icp, cfg, str(masks), int(min_px), float(min_score))
     done: dict[int, tuple] = {}
     if journal is not None:
-        done = {i: journal.done[i] for i in idx if i in journal.done}
-        journal.done = dict(done)  # entries of other images are not kept
-        journal.open()
+        journal.open(keep=idx)  # entries of other images are not kept
+        done = dict(journal.done)
     pending = [i for i in idx if i not in done]
     bar = tqdm(total=len(idx), initial=len(done), desc=f"register {method}{'+icp' if icp else ''}", unit="img",
                disable=not progress)
