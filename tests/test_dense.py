@@ -166,6 +166,52 @@ def test_discover_symmetries_of_shapes():
     assert discover_symmetries(P, diam).trivial
 
 
+def _cube(rng, n: int = 6000, half: float = 0.03):
+    """Points and outward normals on a cube's surface (side 2 * half metres), turned at random and moved off
+    the origin, so no principal axis that ``eigh`` returns need be one of its face normals."""
+    pts = rng.uniform(-1, 1, size=(n, 3))
+    face = rng.integers(0, 3, n)
+    sign = np.sign(pts[np.arange(n), face])
+    pts[np.arange(n), face] = sign
+    normals = np.zeros((n, 3))
+    normals[np.arange(n), face] = sign
+    R = Rotation.random(random_state=rng).as_matrix()
+    return (pts * half) @ R.T + [0.01, -0.02, 0.03], normals @ R.T
+
+
+def test_discover_symmetries_finds_a_cubes_24_turns_from_its_normals():
+    """A cube's principal moments are equal, so its principal axes are arbitrary and the search about them
+    finds nothing; its face normals give the axes, and closing the turns found gives all 24. The cube flagged
+    asymmetric (texture decides its turn) has 24 shape flips, a closed group; a cap of 4 keeps a subgroup."""
+    from sixdpose.datasets.base import ObjectModel
+    from sixdpose.pose.dense import _closed, shape_flips
+
+    rng = np.random.default_rng(5)
+    P, N = _cube(rng)
+    diam = 0.06 * math.sqrt(3)
+    assert len(discover_symmetries(P, diam).R) < 24  # the principal axes alone: not the cube's group
+    s = discover_symmetries(P, diam, normals=N)
+    assert s.axis is None and len(s.R) == 24 and _closed(s.R)
+    c = np.array([0.01, -0.02, 0.03])  # the cube's centre
+    for R, t in zip(s.R, s.t, strict=True):  # each turn is about the centre (up to the subsample's centroid)
+        assert np.allclose(R @ c + t, c, atol=5e-3)
+    assert sorted({round(float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))) for R in s.R}) == [
+        0, 90, 120, 180]
+    cube = ObjectModel("cube", 7, P, N, np.zeros_like(P), diam, False)
+    assert len(shape_flips(cube, 24).R) == 24
+    f4 = shape_flips(cube, 4)
+    assert len(f4.R) == 4 and _closed(f4.R)
+    assert len(discover_symmetries(P, diam, normals=N[:10]).R) < 24  # not the points' normals: unknown
+    # a thin rod with a loose tolerance: near-turns about its long axis pass the shape test but their products
+    # never close into a finite group; the first search's rotations are kept, not MAX_SYMMETRIES of them
+    n = 3000
+    rod = np.stack([rng.uniform(-0.15, 0.15, n), 0.004 * rng.standard_normal(n), 0.004 * rng.standard_normal(n)], 1)
+    rod_n = np.concatenate([np.zeros((n, 1)), rod[:, 1:] / np.linalg.norm(rod[:, 1:], axis=1, keepdims=True)], 1)
+    assert len(discover_symmetries(rod, 0.3, normals=rod_n).R) == len(discover_symmetries(rod, 0.3).R)
+    # zero normals (unknown) change nothing
+    assert len(discover_symmetries(P, diam, normals=np.zeros_like(P)).R) == len(discover_symmetries(P, diam).R)
+
+
 def test_model_symmetry_reads_bop_annotations():
     from sixdpose.datasets.base import ObjectModel
     from sixdpose.pose.dense import model_symmetry

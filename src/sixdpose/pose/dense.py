@@ -108,45 +108,145 @@ def rotation_about(axis: np.ndarray, angle: float) -> np.ndarray:
 
 
 def discover_symmetries(points: np.ndarray, diameter: float, tol: float = SYMMETRY_TOL, max_points: int = 1500,
-                        seed: int = 0) -> Symmetry:
-    """Symmetries of a model found from its shape (for models flagged symmetric without annotations).
+                        seed: int = 0, normals: np.ndarray | None = None) -> Symmetry:
+    """Symmetries of a model found from its shape (for models flagged symmetric without annotations, and the
+    shape flips of :func:`shape_flips`).
 
     Rotations by multiples of 30 degrees about each principal axis through the centroid are kept when the
     mean distance from the rotated points to the nearest model point is below ``tol * diameter`` (and
     below twice the points' own spacing otherwise: sampling noise); an axis about which all 11 of them
     pass is the continuous symmetry (the first such axis), the others are discrete ones.
 
+    A shape whose principal moments are (nearly) equal (a cube) has no defined principal axes, so its
+    symmetry axes need not be the ones ``eigh`` returns. When two moments are within
+    :data:`DEGENERATE_MOMENTS` of each other and no continuous axis was found, the dominant directions of the
+    surface ``normals`` (:func:`normal_frame`: a box's face normals) are tried as well, and the rotations
+    found are closed under composition (each product checked against the shape), so a cube gets its 24
+    turns, not the 3 about arbitrary axes that pass nothing. Products that do not close within
+    :data:`MAX_SYMMETRIES` (the loose near-turns of a thin shape about its long axis) are not a group: the
+    first search's rotations are kept then.
+    A shape with distinct moments has only half turns about its principal axes, which the first search finds.
+
     Args:
         points: (M, 3) model points, metres. diameter: metres. tol: fraction of the diameter.
         max_points: subsample of the points used (deterministic, ``seed``).
+        normals: (M, 3) unit normals of ``points`` (rows of zeros: unknown), or None (also taken when its
+            shape is not the points').
     Returns:
         the :class:`Symmetry` (the identity alone when nothing passes).
     """
     from scipy.spatial import cKDTree
 
     P = np.asarray(points, float)
+    Nm = None if normals is None else np.asarray(normals, float)
+    if Nm is not None and Nm.shape != P.shape:  # not the points' normals: unknown
+        Nm = None
     if len(P) > max_points:
-        P = P[np.random.default_rng(seed).choice(len(P), max_points, replace=False)]
+        idx = np.random.default_rng(seed).choice(len(P), max_points, replace=False)
+        P = P[idx]
+        Nm = None if Nm is None else Nm[idx]
     tree = cKDTree(P)
     spacing = float(np.median(tree.query(P, k=2)[0][:, 1]))
     limit = max(tol * diameter, 2.0 * spacing)
     c = P.mean(axis=0)
-    _, vecs = np.linalg.eigh(np.cov((P - c).T))
+    evals, vecs = np.linalg.eigh(np.cov((P - c).T))
+
+    def fits(R: np.ndarray) -> bool:
+        return float(tree.query((P - c) @ R.T + c)[0].mean()) <= limit
+
     axis: np.ndarray | None = None
-    discrete: list[np.ndarray] = []
+    found: list[np.ndarray] = []
     for k in range(3):
         a = vecs[:, k]
-        ok = []
-        for ang in _DISCRETE_ANGLES:
-            R = rotation_about(a, ang)
-            err = float(tree.query((P - c) @ R.T + c)[0].mean())
-            ok.append(err <= limit)
+        ok = [fits(rotation_about(a, ang)) for ang in _DISCRETE_ANGLES]
         if all(ok) and axis is None:
             axis = a
             continue
-        discrete.extend((rotation_about(a, ang), c - rotation_about(a, ang) @ c)
-                        for ang, good in zip(_DISCRETE_ANGLES, ok, strict=True) if good)
-    return Symmetry.build(discrete, axis, c if axis is not None else None)
+        found.extend(rotation_about(a, ang) for ang, good in zip(_DISCRETE_ANGLES, ok, strict=True) if good)
+    gaps = np.diff(np.maximum(evals, 0.0)) / max(float(evals.max()), 1e-12)
+    if axis is None and Nm is not None and float(gaps.min()) < DEGENERATE_MOMENTS:
+        extra = [rotation_about(a, ang) for a in normal_frame(Nm) for ang in _DISCRETE_ANGLES]
+        group = _group_closure([np.eye(3)] + found + [R for R in extra if fits(R)], fits)
+        if len(group) < MAX_SYMMETRIES:  # a finite group; products that never close are the tolerance's
+            found = group[1:]  # near-turns of a thin shape (a hammer's), not symmetries: keep the first search's
+    return Symmetry.build([(R, c - R @ c) for R in found], axis, c if axis is not None else None)
+
+
+#: Largest gap between two principal moments (variances, as a fraction of the largest) for which the principal
+#: axes count as undefined in :func:`discover_symmetries` (a cube's, a sphere's).
+DEGENERATE_MOMENTS = 0.1
+#: Most rotations :func:`discover_symmetries` keeps when closing a group (a cube has 24, an icosahedron 60).
+MAX_SYMMETRIES = 64
+
+
+def normal_frame(normals: np.ndarray, cone_deg: float = 15.0, min_share: float = 0.1) -> list[np.ndarray]:
+    """Candidate symmetry axes of a shape from its surface normals: the dominant normal direction (as an
+    axis: a normal and its opposite count together) and, when there is one, the next dominant direction
+    perpendicular to it (within 5 degrees), made exactly perpendicular, and their cross product. For a box
+    these are its three face normals, an orthonormal frame, so turns about them compose exactly.
+
+    Args:
+        normals: (M, 3) unit normals (rows of length below 0.5 are ignored).
+        cone_deg: half-angle (degrees) of the cone that counts the normals around a direction.
+        min_share: the least share of the normals an axis's double cone must hold.
+    Returns:
+        a list of 0, 1 or 3 unit axes (3,).
+    """
+    N = np.asarray(normals, float)
+    n = np.linalg.norm(N, axis=1)
+    N = N[n > 0.5] / n[n > 0.5, None]
+    if len(N) < 20:
+        return []
+    k = 400  # directions on a (Fibonacci) hemisphere
+    z = 1.0 - (np.arange(k) + 0.5) / k
+    phi = np.arange(k) * math.pi * (3.0 - math.sqrt(5.0))
+    dirs = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], 1)
+    cone = math.cos(math.radians(cone_deg))
+    counts = (np.abs(N @ dirs.T) > cone).sum(axis=0).astype(float)
+
+    def refined(a: np.ndarray) -> np.ndarray:
+        for _ in range(3):  # the mean of the normals in the double cone, their signs aligned with a
+            d = N @ a
+            sel = np.abs(d) > cone
+            if not sel.any():
+                break
+            a = (N[sel] * np.sign(d[sel])[:, None]).sum(axis=0)
+            a = a / np.linalg.norm(a)
+        return a
+
+    if counts.max() < min_share * len(N):
+        return []
+    a1 = refined(dirs[int(np.argmax(counts))])
+    perp = np.abs(dirs @ a1) < math.sin(math.radians(5.0))
+    if not perp.any() or counts[perp].max() < min_share * len(N):
+        return [a1]
+    a2 = refined(dirs[perp][int(np.argmax(counts[perp]))])
+    a2 = a2 - (a2 @ a1) * a1
+    if np.linalg.norm(a2) < 1e-6:
+        return [a1]
+    a2 /= np.linalg.norm(a2)
+    if abs(float(refined(a2) @ a1)) > math.sin(math.radians(5.0)):  # not a perpendicular face after all
+        return [a1]
+    return [a1, a2, np.cross(a1, a2)]
+
+
+def _group_closure(rots: list[np.ndarray], fits, tol: float = 1e-6) -> list[np.ndarray]:
+    """The rotations ``rots`` (the identity first) and their products that ``fits`` (a shape test) accepts,
+    until no new one passes or :data:`MAX_SYMMETRIES` are held; duplicates (within ``tol``) dropped."""
+    out: list[np.ndarray] = []
+    for R in rots:
+        if all(np.abs(R - Q).max() > tol for Q in out):
+            out.append(R)
+    grew = True
+    while grew and len(out) < MAX_SYMMETRIES:
+        grew = False
+        for A in list(out):
+            for B in list(out):
+                C = A @ B
+                if len(out) < MAX_SYMMETRIES and all(np.abs(C - Q).max() > tol for Q in out) and fits(C):
+                    out.append(C)
+                    grew = True
+    return out
 
 
 def model_symmetry(model) -> Symmetry:
@@ -162,7 +262,7 @@ def model_symmetry(model) -> Symmetry:
             return Symmetry.build(disc, cont[0]["axis"], np.asarray(cont[0].get("offset", [0, 0, 0]), float) / 1000.0)
         return Symmetry.build(disc)
     if model.symmetric:
-        return discover_symmetries(model.points, float(model.diameter))
+        return discover_symmetries(model.points, float(model.diameter), normals=model.normals)
     return Symmetry.none()
 
 
@@ -189,7 +289,7 @@ def shape_flips(model, max_flips: int) -> Symmetry:
         raise ValueError(f"max_flips must be >= 1, got {max_flips}")
     if model.symmetric or model.symmetries:
         return Symmetry.none()
-    g = discover_symmetries(model.points, float(model.diameter))
+    g = discover_symmetries(model.points, float(model.diameter), normals=model.normals)
     k = min(len(g.R), max_flips, 2 if g.axis is not None else len(g.R))
     while k > 1 and not _closed(g.R[:k]):
         k -= 1
