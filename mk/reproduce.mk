@@ -7,6 +7,9 @@
 #   runs/P/poses/<split>_<masks>_<method>.csv  sixdpose register (hybrid) / predict-pose (learned)
 #   results/P/<split>_<masks>_<method>.json  sixdpose evaluate --result-name (+ .csv; commit, date, hardware)
 #   runs/P/seg/pred_test/meta.json           sixdpose segment    (notebook 03's held-out training images)
+#   runs/P/seg_fast/model.pt, masks_fast/test/meta.json  train-seg, segment (cpu: the dense head's real-time
+#                                            segmenter, SEG_FAST_P; results/P/test_fast_<method>.json its rows)
+#   results/P/e2e_dense.json                 benchmarks/pose.py (cpu, paper: the dense head end to end, timed)
 #   data/<test>_kinect, results/P/test_kinect_gt_<method>.json  the test split with kinect depth (notebook 08)
 #   results/P/pose_ablation_P.json           sixdpose pose-ablation (notebook 05)
 #   notebooks/executed/P/NN_*.ipynb          papermill, on top of those files (figures/P/...)
@@ -79,6 +82,20 @@ $(RUNS)/masks/single/meta.json: $(DATA_single)/manifest.json
 $(RUNS)/seg/pred_test/meta.json: $(RUNS)/seg/model.pt $(TRAIN_DIR)/manifest.json | $(VENV_OK)
 	$(SIXDPOSE) segment --data $(TRAIN_DIR) --seg $(RUNS)/seg --subset test --out $(@D) --no-progress
 
+# the dense head's real-time segmenter (SEG_FAST_$(PROFILE), profiles that have one): trained on the same data,
+# its masks of the multi-instance test split scored with the dense head (rows test_fast_dense*, beside Tables I-III,
+# not in them), and the end-to-end frame rate of that pipeline (benchmarks/pose.py, results/P/e2e_dense.json)
+ifneq ($(SEG_FAST_$(PROFILE)),)
+$(RUNS)/seg_fast/model.pt: $(TRAIN_DIR)/manifest.json | $(VENV_OK)
+	$(SIXDPOSE) train-seg --data $(TRAIN_DIR) --out $(@D) --no-progress \
+	  $(if $(wildcard $(@D)/last.pt),--resume,$(SEG_FAST_$(PROFILE)))
+
+$(RUNS)/masks_fast/test/meta.json: $(RUNS)/seg_fast/model.pt $(DATA_test)/manifest.json | $(VENV_OK)
+	$(SIXDPOSE) segment --data $(DATA_test) --seg $(RUNS)/seg_fast --out $(@D) --no-progress
+FAST_SEG := seg_fast
+FAST_STAGES := $(RUNS)/seg_fast/model.pt $(RUNS)/masks_fast/test/meta.json
+endif
+
 # ---- learned pose ------------------------------------------------------------------------------
 _val = $(if $(VAL_DIR),--val $(VAL_DIR))
 $(RUNS)/pose/model.pt: $(TRAIN_DIR)/manifest.json $(if $(VAL_DIR),$(VAL_DIR)/manifest.json) | $(VENV_OK)
@@ -147,6 +164,33 @@ $(RES)/$(1)_$(2)_$(3).json: $(POSES)/$(1)_$(2)_$(3).csv $(DATA_$(1))/manifest.js
 endef
 $(foreach s,$(SPLITS),$(foreach k,$(MASKS),$(foreach m,$(METHODS),$(eval $(call pose_rule,$(s),$(k),$(m))))))
 
+# the dense head on the real-time segmenter's masks (profiles with SEG_FAST_$(PROFILE)): test_fast_<method>
+ifneq ($(SEG_FAST_$(PROFILE)),)
+FAST_METHODS := dense dense_icp
+define fast_rule
+$(POSES)/test_fast_$(1).csv: $(DATA_test)/manifest.json $(NEEDS_$(1)) $(RUNS)/masks_fast/test/meta.json | $(VENV_OK)
+	$(SIXDPOSE) $(CMD_$(1)) --data $(DATA_test) --masks $(RUNS)/masks_fast/test --score-thresh 0.5 $(_limit) --no-progress --out $$@
+
+$(RES)/test_fast_$(1).json: $(POSES)/test_fast_$(1).csv $(DATA_test)/manifest.json | $(VENV_OK)
+	$(SIXDPOSE) evaluate --data $(DATA_test) --results $$< --no-bop --no-progress --all-images $(_limit) --label test_fast_$(1) \
+	  --result-name test_fast_$(1) --results-dir $(RES)
+endef
+$(foreach m,$(FAST_METHODS),$(eval $(call fast_rule,$(m))))
+FAST_RESULTS := $(foreach m,$(FAST_METHODS),$(RES)/test_fast_$(m).json)
+endif
+# the dense head end to end (segmentation, then the pose stage, on the test split's first 40 frames, 3 passes;
+# the real-time segmenter where the profile has one, else its Mask R-CNN): benchmarks/pose.py's figures as a
+# result (the pose stage alone on GT masks and the training throughput beside them); cpu and paper (smoke and demo
+# time nothing). A timing: run it alone
+ifneq ($(filter cpu paper,$(PROFILE)),)
+E2E_SEG := $(or $(FAST_SEG),seg)
+E2E_DEVICE := $(if $(filter paper,$(PROFILE)),cuda,cpu)
+E2E_RESULT := $(RES)/e2e_dense.json
+$(E2E_RESULT): $(RUNS)/pose_dense/model.pt $(RUNS)/$(E2E_SEG)/model.pt $(DATA_test)/manifest.json | $(VENV_OK)
+	$(PY) benchmarks/pose.py --pose $(RUNS)/pose_dense --seg $(RUNS)/$(E2E_SEG) --data $(DATA_test) --device $(E2E_DEVICE) \
+	  --frames 40 --repeats 3 --steps 5 --result-name e2e_dense --results-dir $(RES)
+endif
+
 # ---- sensor noise (notebook 08): the multi-instance test split again with the `kinect` depth model -----
 # (the same scenes and images; masks and poses exact), scored by the hybrid methods with ICP beside their
 # ideal-depth rows test_gt_<method>
@@ -160,10 +204,10 @@ KINECT_RESULTS := $(foreach m,$(KINECT_METHODS),$(RES)/test_kinect_gt_$(m).json)
 # the stages in the order of the plan (`make -n reproduce` lists them so)
 STAGES = $(IMAGENET_WEIGHTS) $(foreach g,$(DATASETS),data/$(g)/manifest.json) $(DATA_test_kinect)/manifest.json \
 	$(RUNS)/seg/model.pt $(RUNS)/pose/model.pt $(RUNS)/refiner/model.pt $(RUNS)/pose_dense/model.pt $(RUNS)/masks/test/meta.json $(RUNS)/masks/single/meta.json \
-	$(RUNS)/seg/pred_test/meta.json $(YCBV_STAGES)
+	$(RUNS)/seg/pred_test/meta.json $(FAST_STAGES) $(YCBV_STAGES)
 # results of record: every split x masks x method, the kinect rows and the ablation
 RESULTS := $(foreach s,$(SPLITS),$(foreach k,$(MASKS),$(foreach m,$(METHODS),$(RES)/$(s)_$(k)_$(m).json))) \
-	$(KINECT_RESULTS) $(ABLATION_RESULT) $(ABLATION_SEEDS_RESULT)
+	$(KINECT_RESULTS) $(ABLATION_RESULT) $(ABLATION_SEEDS_RESULT) $(FAST_RESULTS) $(E2E_RESULT)
 
 # ---- synthetic to real (notebook 09): networks trained only on generated YCB-Video data -----------
 # YCBV_REAL (a BOP YCB-Video root, split YCBV_SPLIT) holds the real frames they are scored on, with the

@@ -41,8 +41,17 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
     seg_line = next(line for line in _lines(out, "train-seg") if f"--out runs/{profile}/seg" in line)
     # a new run gets the profile; an interrupted one (last.pt in this checkout) is resumed
     assert out.split(seg_line, 1)[1].lstrip().startswith((f"--profile {seg}", "--resume")) or "--resume" in seg_line
-    # the held-out splits' masks, and notebook 03's predictions on the seg run's own held-out images
-    assert len(_lines(out, "segment")) == 3
+    # the held-out splits' masks, and notebook 03's predictions on the seg run's own held-out images; cpu also
+    # trains the dense head's real-time segmenter (SEG_FAST_cpu) and segments the test split with it
+    fast = profile == "cpu"
+    assert len(_lines(out, "segment")) == 3 + fast
+    fast_seg = [line for line in _lines(out, "train-seg") if "--out runs/cpu/seg_fast " in line]
+    assert len(fast_seg) == fast
+    if fast:
+        rest = out.split(fast_seg[0], 1)[1].split("\n.venv")[0]  # its continuation line
+        assert "--set backbone=mobilenet_v3_large" in rest or "--resume" in rest
+        assert ".venv/bin/sixdpose segment --data data/test --seg runs/cpu/seg_fast --out runs/cpu/masks_fast/test " \
+            in out
     assert f".venv/bin/sixdpose segment --data {train} --seg runs/{profile}/seg --subset test " \
         f"--out runs/{profile}/seg/pred_test --no-progress" in out
     # the synthetic-to-real branch: ycbv data, 6 networks + 2 refiners, 15 methods on real frames
@@ -61,12 +70,20 @@ def test_the_plan_of_each_profile(profile, train, seg, splits):
     # and paper the 3 hybrid rows with the paper's settings
     paper_rows = [line for line in poses if "--preset paper" in line]
     assert len(paper_rows) == (12 if ycbv else 0)
-    assert len(poses) == 52 + len(paper_rows) and len(evals) == len(poses)
+    # cpu: the dense head and + ICP on the real-time segmenter's masks (test_fast_dense, test_fast_dense_icp)
+    fast_rows = [line for line in poses if "--masks runs/cpu/masks_fast/test --score-thresh 0.5" in line]
+    assert len(fast_rows) == 2 * fast
+    assert len(poses) == 52 + len(paper_rows) + len(fast_rows) and len(evals) == len(poses)
+    # the dense head end to end (benchmarks/pose.py) at cpu and paper, on the real-time segmenter where there is one
+    e2e = [line for line in out.splitlines() if line.startswith(".venv/bin/python benchmarks/pose.py ")]
+    assert len(e2e) == (profile in ("cpu", "paper"))
+    if e2e:
+        assert f"--seg runs/{profile}/{'seg_fast' if fast else 'seg'} " in e2e[0]
     # the dense head (runs/P/pose_dense) trained once on the training data, with DENSE_<profile>'s recipe
     dense = [line for line in _lines(out, "train-pose") if f"--out runs/{profile}/pose_dense " in line]
     assert len(dense) == 1 and f"--data {train} " in dense[0]
     assert out.split(dense[0], 1)[1].lstrip().startswith(("--profile", "--resume")) or "--resume" in dense[0]
-    assert sum(f"--pose runs/{profile}/pose_dense" in line for line in poses) == 12
+    assert sum(f"--pose runs/{profile}/pose_dense" in line for line in poses) == 12 + len(fast_rows)
     assert sum(f"--pose runs/{profile}/pose_dense --icp --verify" in line for line in poses) == 4
     assert sorted({re.search(r"_(?:gt|pred)_(\w+_paper)\.csv", line).group(1) for line in paper_rows}) == \
         (["fgr_icp_paper", "ransac_icp_paper", "super4pcs_paper"] if ycbv else [])
