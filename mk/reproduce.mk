@@ -147,16 +147,19 @@ CMD_dense_icp      := $(CMD_dense) --icp
 CMD_dense_icp_verify := $(CMD_dense) --icp --verify
 $(foreach m,dense dense_icp dense_icp_verify,$(eval NEEDS_$(m) := $(RUNS)/pose_dense/model.pt))
 # mask arguments: GT masks count instances with >= 400 visible px (as evaluate does); predicted masks
-# keep detections scoring >= 0.5
+# keep detections scoring >= 0.5. Predicted masks come from a segmenter's directory of masks per split:
+# `pred` the profile's Mask R-CNN (runs/P/masks), `fast` the real-time segmenter (runs/P/masks_fast)
+MASKDIR_pred := $(RUNS)/masks
+MASKDIR_fast := $(RUNS)/masks_fast
 ARGS_register_gt     := --masks gt --min-px 400 --workers $(WORKERS)
-ARGS_register_pred   = --masks $(RUNS)/masks/$(1) --score-thresh 0.5 --workers $(WORKERS)
+ARGS_register_pred   = --masks $(MASKDIR_$(2))/$(1) --score-thresh 0.5 --workers $(WORKERS)
 ARGS_predict-pose_gt := --masks gt
-ARGS_predict-pose_pred = --masks $(RUNS)/masks/$(1) --score-thresh 0.5
+ARGS_predict-pose_pred = --masks $(MASKDIR_$(2))/$(1) --score-thresh 0.5
 
-# $(call pose_rule,split,masks,method)
+# $(call pose_rule,split,masks,method): masks gt, pred or fast
 define pose_rule
-$(POSES)/$(1)_$(2)_$(3).csv: $(DATA_$(1))/manifest.json $(NEEDS_$(3)) $(if $(filter pred,$(2)),$(RUNS)/masks/$(1)/meta.json) | $(VENV_OK)
-	$(SIXDPOSE) $(CMD_$(3)) --data $(DATA_$(1)) $(if $(filter pred,$(2)),$(call ARGS_$(firstword $(CMD_$(3)))_pred,$(1)),$(ARGS_$(firstword $(CMD_$(3)))_gt)) $(_limit) --no-progress --out $$@
+$(POSES)/$(1)_$(2)_$(3).csv: $(DATA_$(1))/manifest.json $(NEEDS_$(3)) $(if $(filter-out gt,$(2)),$(MASKDIR_$(2))/$(1)/meta.json) | $(VENV_OK)
+	$(SIXDPOSE) $(CMD_$(3)) --data $(DATA_$(1)) $(if $(filter-out gt,$(2)),$(call ARGS_$(firstword $(CMD_$(3)))_pred,$(1),$(2)),$(ARGS_$(firstword $(CMD_$(3)))_gt)) $(_limit) --no-progress --out $$@
 
 $(RES)/$(1)_$(2)_$(3).json: $(POSES)/$(1)_$(2)_$(3).csv $(DATA_$(1))/manifest.json | $(VENV_OK)
 	$(SIXDPOSE) evaluate --data $(DATA_$(1)) --results $$< --no-bop --no-progress --all-images $(_limit) --label $(1)_$(2)_$(3) \
@@ -167,15 +170,7 @@ $(foreach s,$(SPLITS),$(foreach k,$(MASKS),$(foreach m,$(METHODS),$(eval $(call 
 # the dense head on the real-time segmenter's masks (profiles with SEG_FAST_$(PROFILE)): test_fast_<method>
 ifneq ($(SEG_FAST_$(PROFILE)),)
 FAST_METHODS := dense dense_icp
-define fast_rule
-$(POSES)/test_fast_$(1).csv: $(DATA_test)/manifest.json $(NEEDS_$(1)) $(RUNS)/masks_fast/test/meta.json | $(VENV_OK)
-	$(SIXDPOSE) $(CMD_$(1)) --data $(DATA_test) --masks $(RUNS)/masks_fast/test --score-thresh 0.5 $(_limit) --no-progress --out $$@
-
-$(RES)/test_fast_$(1).json: $(POSES)/test_fast_$(1).csv $(DATA_test)/manifest.json | $(VENV_OK)
-	$(SIXDPOSE) evaluate --data $(DATA_test) --results $$< --no-bop --no-progress --all-images $(_limit) --label test_fast_$(1) \
-	  --result-name test_fast_$(1) --results-dir $(RES)
-endef
-$(foreach m,$(FAST_METHODS),$(eval $(call fast_rule,$(m))))
+$(foreach m,$(FAST_METHODS),$(eval $(call pose_rule,test,fast,$(m))))
 FAST_RESULTS := $(foreach m,$(FAST_METHODS),$(RES)/test_fast_$(m).json)
 endif
 # the dense head end to end (segmentation, then the pose stage, on the test split's first 40 frames, 3 passes;
