@@ -439,6 +439,18 @@ def _box_model(symmetric: bool = False):
     return ObjectModel("box", 2, box, np.zeros_like(box), np.zeros_like(box), 0.12, symmetric)
 
 
+def _can_model(rng, n: int = 4000):
+    """A can (closed cylinder along y, radius 3 cm, height 10 cm) flagged asymmetric: n side points, n / 2 caps."""
+    from sixdpose.datasets.base import ObjectModel
+
+    ang, h = rng.uniform(0, 2 * math.pi, n), rng.uniform(-0.05, 0.05, n)
+    side = np.stack([0.03 * np.cos(ang), h, 0.03 * np.sin(ang)], 1)
+    r, a2 = 0.03 * np.sqrt(rng.uniform(0, 1, n // 2)), rng.uniform(0, 2 * math.pi, n // 2)
+    caps = np.stack([r * np.cos(a2), np.where(rng.random(n // 2) < 0.5, -0.05, 0.05), r * np.sin(a2)], 1)
+    can = ObjectModel("can", 3, np.concatenate([side, caps]), np.zeros((2 * n, 3)), np.zeros((2 * n, 3)), 0.117, False)
+    return can
+
+
 def test_shape_flips_canonical_turn_and_unflip_recover_the_pose():
     """A box flagged asymmetric has 4 shape flips; every equivalent pose names the same canonical pose; the
     canonical coordinates fitted back to the cloud and unflipped give the true pose."""
@@ -467,14 +479,7 @@ def test_shape_flips_canonical_turn_and_unflip_recover_the_pose():
         assert np.allclose(Rb, R, atol=1e-6) and np.allclose(tb, t, atol=1e-6)
     # a can (closed cylinder along y) flagged asymmetric: the identity and one half turn, the axis kept; the
     # canonical turn's axis is the same under every turn about the axis and upside down
-    from sixdpose.datasets.base import ObjectModel
-
-    n = 4000
-    ang, h = rng.uniform(0, 2 * math.pi, n), rng.uniform(-0.05, 0.05, n)
-    side = np.stack([0.03 * np.cos(ang), h, 0.03 * np.sin(ang)], 1)
-    r, a2 = 0.03 * np.sqrt(rng.uniform(0, 1, n // 2)), rng.uniform(0, 2 * math.pi, n // 2)
-    caps = np.stack([r * np.cos(a2), np.where(rng.random(n // 2) < 0.5, -0.05, 0.05), r * np.sin(a2)], 1)
-    can = ObjectModel("can", 3, np.concatenate([side, caps]), np.zeros((2 * n, 3)), np.zeros((2 * n, 3)), 0.117, False)
+    can = _can_model(rng)
     fc = shape_flips(can, 8)
     assert len(fc.R) == 2 and fc.axis is not None and abs(abs(fc.axis[1]) - 1) < 1e-2
     for _ in range(10):
@@ -483,6 +488,57 @@ def test_shape_flips_canonical_turn_and_unflip_recover_the_pose():
         for phi, e in ((0.7, 0), (2.0, 1), (-1.2, 1)):
             Re = R @ rotation_about(fc.axis, phi) @ fc.R[e]
             assert np.allclose(Re @ fc.R[canonical_flip(Re, fc)] @ fc.axis, axis, atol=1e-6)
+
+
+def test_view_flip_names_one_canonical_pose_by_where_the_camera_is():
+    """flip_canon=view: for a cube (24 turns), a box (4) and a can (a half turn and an axis), every equivalent
+    pose X S_e names the same canonical pose; the canonical pose puts the camera on the reference side; a pose
+    turned a little (no tie crossed) keeps its turn, so the choice follows what the image shows."""
+    from sixdpose.datasets.base import ObjectModel
+    from sixdpose.pose.dense import _VIEW_REF, flip_centre, shape_flips, view_flip
+
+    rng = np.random.default_rng(11)
+    P, N = _cube(rng)
+    cube = shape_flips(ObjectModel("cube", 7, P, N, np.zeros_like(P), 0.06 * math.sqrt(3), False), 24)
+    assert len(cube.R) == 24
+    c = flip_centre(cube)
+    assert np.allclose(c, [0.01, -0.02, 0.03], atol=5e-3)  # the cube's centre
+    box = shape_flips(_box_model(), 8)
+    assert np.allclose(flip_centre(box)[:2], [0.01, 0.0], atol=2e-3)
+    for fl in (cube, box):
+        cen = flip_centre(fl)
+        for _ in range(20):
+            R, t = Rotation.random(random_state=rng).as_matrix(), np.array([0.05, -0.03, 0.8])
+            d = view_flip(R, t, fl)
+            canon, canon_t = R @ fl.R[d], R @ fl.t[d] + t
+            cam = (-canon_t) @ canon - cen  # the camera seen from the canonical pose's object frame
+            others = [(Rd.T @ ((-canon_t) @ canon - td)) - cen for Rd, td in zip(fl.R, fl.t, strict=True)]
+            assert cam @ _VIEW_REF >= max(o @ _VIEW_REF for o in others) - 1e-9
+            for e in range(len(fl.R)):
+                Re, te = R @ fl.R[e], R @ fl.t[e] + t
+                de = view_flip(Re, te, fl)
+                assert np.allclose(Re @ fl.R[de], canon, atol=1e-6)
+                assert np.allclose(Re @ fl.t[de] + te, canon_t, atol=1e-6)
+    # 48 small turns of one pose: the canonical turn stays unless the view crosses a tie (rare)
+    R, t = Rotation.random(random_state=rng).as_matrix(), np.array([0.0, 0.0, 0.7])
+    d0 = view_flip(R, t, cube)
+    same = [view_flip(Rotation.from_rotvec(rng.normal(0, 0.01, 3)).as_matrix() @ R, t, cube) == d0 for _ in range(48)]
+    assert sum(same) >= 40
+    # a can: the canonical turn has the camera on the + side of its axis, under any turn about it and upside down
+    can = _can_model(rng)
+    fc = shape_flips(can, 8)
+    for _ in range(10):
+        R, t = Rotation.random(random_state=rng).as_matrix(), np.array([0.1, 0.0, 0.9])
+        d = view_flip(R, t, fc)
+        canon, canon_t = R @ fc.R[d], R @ fc.t[d] + t
+        assert ((-canon_t) @ canon - flip_centre(fc)) @ fc.axis >= 0
+        for e in range(2):
+            Re, te = R @ fc.R[e], R @ fc.t[e] + t
+            assert np.allclose(Re @ fc.R[view_flip(Re, te, fc)], canon, atol=1e-6)
+    with pytest.raises(ValueError, match="flip_canon"):
+        from sixdpose.pose.config import PoseConfig
+
+        PoseConfig(head="dense", flip_canon="camera")
 
 
 def test_flip_classifier_outputs_and_loss():

@@ -47,6 +47,8 @@ APPEARANCES = ("cnn", "local", "local_rgb", "none")
 FLIP_CHOICES = ("auto", "classifier", "colour")
 #: the frame the dense head sees the centred cloud in (PoseConfig.input_frame)
 INPUT_FRAMES = ("camera", "pca")
+#: how training picks the canonical shape flip of a pose (PoseConfig.flip_canon)
+FLIP_CANONS = ("frame", "view")
 DENSE_LOSSES = ("densefusion", "decoupled")
 
 
@@ -123,6 +125,11 @@ class PoseConfig(FrameSchedule):
             the input no longer changes when the object turns with respect to the camera and the
             coordinates it must give back, which live in the object's frame, do not either; the canonical
             shape flip is chosen in that frame too). The pose is still fitted to the camera-frame cloud.
+        flip_canon: which turn of a shape flip training regresses (``flips`` > 0): ``frame`` (the turn whose
+            axes are closest to those of the frame the network sees the cloud in,
+            :func:`~sixdpose.pose.dense.canonical_flip`) or ``view`` (the turn that puts the camera on a fixed
+            side of the object, :func:`~sixdpose.pose.dense.view_flip`: defined by the seen faces, so also for a
+            cube, whose principal axes are arbitrary). Inference is the same for both.
 
     Data:
         num_points: masked pixels with valid depth sampled per instance (fewer: wrapped repeats).
@@ -172,6 +179,7 @@ class PoseConfig(FrameSchedule):
     appearance: str = "cnn"
     flip_choice: str = "auto"
     input_frame: str = "camera"
+    flip_canon: str = "frame"
     rgb_noise: float = bounded(0.3, min=0, max=1)
     colour_jitter: float = bounded(0.0, min=0, max=1, max_open=True)
     mask_jitter_px: int = bounded(0, min=0, max=64)
@@ -204,6 +212,8 @@ class PoseConfig(FrameSchedule):
             raise ValueError(f"appearance={self.appearance!r} needs head=dense, got head={self.head!r}")
         if self.flip_choice not in FLIP_CHOICES:
             raise ValueError(f"flip_choice must be one of {FLIP_CHOICES}, got {self.flip_choice!r}")
+        if self.flip_canon not in FLIP_CANONS:
+            raise ValueError(f"flip_canon must be one of {FLIP_CANONS}, got {self.flip_canon!r}")
         if self.input_frame not in INPUT_FRAMES:
             raise ValueError(f"input_frame must be one of {INPUT_FRAMES}, got {self.input_frame!r}")
         if self.input_frame != "camera" and self.head != "dense":

@@ -322,6 +322,42 @@ def canonical_flip(R: np.ndarray, flips: Symmetry, frame: np.ndarray | None = No
     return int(np.argmax(np.einsum("ij,dji->d", R, flips.R)))
 
 
+#: Reference direction (object frame) of :func:`view_flip`: a generic one, so that ties between turns are rare.
+_VIEW_REF = np.array([0.36, 0.48, 0.80]) / np.linalg.norm([0.36, 0.48, 0.80])
+
+
+def flip_centre(flips: Symmetry) -> np.ndarray:
+    """The point (object frame, metres) that every turn of ``flips`` leaves in place (``R_d c + t_d = c``; the
+    least-squares one, the shortest where the turns leave a line fixed). Returns (3,)."""
+    if len(flips.R) < 2:
+        return np.zeros(3) if flips.offset is None else np.asarray(flips.offset, float)
+    A = np.concatenate([np.eye(3) - Rd for Rd in flips.R[1:]])
+    return np.linalg.lstsq(A, np.concatenate(list(flips.t[1:])), rcond=None)[0]
+
+
+def view_flip(R: np.ndarray, t: np.ndarray, flips: Symmetry) -> int:
+    """Index of the canonical turn of a pose chosen by where the camera is, seen from the object: the flip
+    ``S_d`` whose pose ``X S_d`` puts the camera centre, in its object frame and relative to the turns' fixed
+    point (:func:`flip_centre`), furthest along a fixed object-frame direction (``_VIEW_REF``; for a shape with a
+    continuous axis, along the axis). Every equivalent pose names the same canonical pose (up to ties), as with
+    :func:`canonical_flip`, and which sides of the object face the camera is what its visible surface shows,
+    whatever frame the network sees the cloud in (the way :func:`coordinate_targets` canonicalises a continuous
+    symmetry). A cube's turn then follows from its seen faces, not from principal axes that it does not have.
+
+    Args:
+        R: (3, 3), t: (3,) metres, ``X_CO``. flips: the object's :func:`shape_flips`.
+    Returns:
+        d in ``range(len(flips.R))``.
+    """
+    R, t = np.asarray(R, float), np.asarray(t, float)
+    cam = (-t) @ R  # the camera centre in the object frame of X
+    c = flip_centre(flips)
+    # the camera centre in the frame of X S_d, from the fixed point: R_d^T (cam - t_d) - c = R_d^T (cam - c)
+    u = np.einsum("dji,j->di", flips.R, cam - c)
+    ref = _VIEW_REF if flips.axis is None else np.asarray(flips.axis, float)
+    return int(np.argmax(u @ ref))
+
+
 def unflip(R: np.ndarray, t: np.ndarray, Rd: np.ndarray, td: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The pose ``X`` from the pose of its turn ``X S_d`` (``S_d = (Rd, td)``, ``x -> Rd x + td``, metres):
     ``X = (X S_d) S_d^-1``. Returns ``(R (3, 3), t (3,))``."""

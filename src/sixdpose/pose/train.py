@@ -33,7 +33,7 @@ from ..training import train as _engine_train
 from . import checkpoint as ck
 from .config import PoseConfig, RefinerConfig, profile_config, refiner_profile_config
 from .data import FrameDataset, PoseError, collate_frames, collate_list, sample_model_points
-from .dense import canonical_flip, coordinate_targets, dense_loss, flip_loss, model_symmetry, shape_flips
+from .dense import canonical_flip, coordinate_targets, dense_loss, flip_loss, model_symmetry, shape_flips, view_flip
 from .geometry import compose_refinement, perturb_poses, to_object_frame
 from .loss import pose_loss
 from .model import build_posenet, build_refiner
@@ -216,7 +216,7 @@ class PoseTask(TrainTask):
                     tgs.append(coordinate_targets(i.cloud, i.R, i.t, self.symmetries[i.obj_id]))
                     labels.append(0)
                 else:  # a shape flip: the canonical turn's coordinates, the turn classified
-                    d = canonical_flip(i.R, fl, fr)
+                    d = view_flip(i.R, i.t, fl) if cfg.flip_canon == "view" else canonical_flip(i.R, fl, fr)
                     tgs.append(coordinate_targets(i.cloud, i.R, i.t, fl)[d:d + 1])
                     labels.append(d)
             S = max(len(x) for x in tgs)
