@@ -293,6 +293,24 @@ def test_grey_detail_tells_a_flip_of_black_print_on_white_apart(monkeypatch):
     assert not bare.textured and (bare.texture == 0).all()
 
 
+def test_hemisphere_axes_cover_the_upper_hemisphere_evenly():
+    """sixdpose.geometry.hemisphere_axes (the half-turn search's axes, the normals' directions of the dense
+    head's symmetry search): n unit axes with z > 0, none far from its nearest neighbour's spacing, and every
+    direction of the sphere within a few degrees of one of them or its opposite."""
+    from sixdpose.geometry import hemisphere_axes
+
+    A = hemisphere_axes(400)
+    assert A.shape == (400, 3) and np.allclose(np.linalg.norm(A, axis=1), 1) and (A[:, 2] > 0).all()
+    cos = A @ A.T
+    np.fill_diagonal(cos, -1)
+    nearest = np.degrees(np.arccos(np.clip(cos.max(axis=1), -1, 1)))
+    assert nearest.max() < 2 * np.median(nearest)  # no cluster, no hole
+    d = np.random.default_rng(0).standard_normal((2000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    worst = np.degrees(np.arccos(np.clip(np.abs(d @ A.T).max(axis=1), -1, 1))).max()
+    assert worst < 10.0
+
+
 def test_neighbourhood_means_equal_the_per_point_means():
     """sixdpose.geometry.neighbourhood_means (the colour search's and the surface's smoothing) equals the
     per-point mean over cKDTree neighbourhoods, for vectors and scalars; an empty neighbourhood is refused."""

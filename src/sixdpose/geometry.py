@@ -7,6 +7,8 @@ object O in the camera C.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -48,3 +50,19 @@ def neighbourhood_means(values: np.ndarray, neighbours) -> np.ndarray:
     np.cumsum(lens[:-1], out=starts[1:])
     sums = np.add.reduceat(np.asarray(values, dtype=np.float64)[flat], starts, axis=0)
     return sums / lens.reshape(-1, *([1] * (sums.ndim - 1)))
+
+
+def hemisphere_axes(n: int) -> np.ndarray:
+    """``n`` unit axes spread evenly over the upper hemisphere (``z > 0``; a Fibonacci lattice), for searches
+    over axes where ``a`` and ``-a`` are the same (a half-turn about ``a``, a normal's double cone).
+
+    Args:
+        n: number of axes (>= 1).
+    Returns:
+        (n, 3) float64 unit vectors, ``z`` from near 1 down to near 0.
+    """
+    i = np.arange(n) + 0.5
+    z = 1.0 - i / n
+    r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+    phi = math.pi * (1.0 + math.sqrt(5.0)) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)

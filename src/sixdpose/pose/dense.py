@@ -47,6 +47,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from ..geometry import hemisphere_axes
 from ..registration import kabsch_batch
 from .config import DENSE_LOSSES
 
@@ -197,10 +198,7 @@ def normal_frame(normals: np.ndarray, cone_deg: float = 15.0, min_share: float =
     N = N[n > 0.5] / n[n > 0.5, None]
     if len(N) < 20:
         return []
-    k = 400  # directions on a (Fibonacci) hemisphere
-    z = 1.0 - (np.arange(k) + 0.5) / k
-    phi = np.arange(k) * math.pi * (3.0 - math.sqrt(5.0))
-    dirs = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], 1)
+    dirs = hemisphere_axes(400)  # a normal and its opposite count together: a hemisphere of directions
     cone = math.cos(math.radians(cone_deg))
     counts = (np.abs(N @ dirs.T) > cone).sum(axis=0).astype(float)
 

@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING
 import numba
 import numpy as np
 
-from ..geometry import X_from
+from ..geometry import X_from, hemisphere_axes
 
 if TYPE_CHECKING:
     from .geometry import ReferenceCache
@@ -234,16 +234,6 @@ def slides(surface: Surface, n_slides: int, step_rel: float, min_elong: float = 
     return np.stack(out) if out else np.zeros((0, 4, 4))
 
 
-def _half_turn_axes(n: int) -> np.ndarray:
-    """``n`` unit axes spread evenly over a hemisphere (a Fibonacci lattice; a half-turn about ``a`` is
-    the half-turn about ``-a``)."""
-    i = np.arange(n) + 0.5
-    z = 1.0 - i / n
-    r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
-    phi = math.pi * (1.0 + math.sqrt(5.0)) * i
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
-
-
 class _ColourGrid:
     """A voxel grid over a model's samples ``P`` (M, 3) with colours ``C`` (M, 3): per cell the distance to
     the nearest sample and that sample's colour, so that posing the samples and reading the grid replaces a
@@ -364,7 +354,7 @@ def near_symmetries(surface: Surface, n_axes: int = 150, keep: int = 6, min_fit:
 
     c = surface.centroid
     found = []
-    for a in _half_turn_axes(n_axes):
+    for a in hemisphere_axes(n_axes):
         R = Rotation.from_rotvec(math.pi * a).as_matrix()
         R, t = icp(R, c - R @ c, tree.query, True)
         fit, corr = fit_of(R, t)
@@ -381,7 +371,7 @@ def near_symmetries(surface: Surface, n_axes: int = 150, keep: int = 6, min_fit:
         grid = _ColourGrid(P, C, tree, surface.spacing, tol)
         sub2 = rng.choice(len(P), min(10 * n_points, len(P)), replace=False)
         sub3 = rng.choice(len(P), min(20 * n_points, len(P)), replace=False)
-        axes = _half_turn_axes(n_dense)
+        axes = hemisphere_axes(n_dense)
         Rs = Rotation.from_rotvec(math.pi * axes).as_matrix()
         fits, corrs = grid.fit_corr(P[sub2] - c, C[sub2], Rs, c)
         order = [i for i in np.argsort(-corrs) if fits[i] >= min_fit]
