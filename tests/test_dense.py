@@ -447,8 +447,7 @@ def _can_model(rng, n: int = 4000):
     side = np.stack([0.03 * np.cos(ang), h, 0.03 * np.sin(ang)], 1)
     r, a2 = 0.03 * np.sqrt(rng.uniform(0, 1, n // 2)), rng.uniform(0, 2 * math.pi, n // 2)
     caps = np.stack([r * np.cos(a2), np.where(rng.random(n // 2) < 0.5, -0.05, 0.05), r * np.sin(a2)], 1)
-    can = ObjectModel("can", 3, np.concatenate([side, caps]), np.zeros((2 * n, 3)), np.zeros((2 * n, 3)), 0.117, False)
-    return can
+    return ObjectModel("can", 3, np.concatenate([side, caps]), np.zeros((2 * n, 3)), np.zeros((2 * n, 3)), 0.117, False)
 
 
 def test_shape_flips_canonical_turn_and_unflip_recover_the_pose():
@@ -495,6 +494,7 @@ def test_view_flip_names_one_canonical_pose_by_where_the_camera_is():
     pose X S_e names the same canonical pose; the canonical pose puts the camera on the reference side; a pose
     turned a little (no tie crossed) keeps its turn, so the choice follows what the image shows."""
     from sixdpose.datasets.base import ObjectModel
+    from sixdpose.pose.config import PoseConfig
     from sixdpose.pose.dense import _VIEW_REF, flip_centre, shape_flips, view_flip
 
     rng = np.random.default_rng(11)
@@ -536,8 +536,6 @@ def test_view_flip_names_one_canonical_pose_by_where_the_camera_is():
             Re, te = R @ fc.R[e], R @ fc.t[e] + t
             assert np.allclose(Re @ fc.R[view_flip(Re, te, fc)], canon, atol=1e-6)
     with pytest.raises(ValueError, match="flip_canon"):
-        from sixdpose.pose.config import PoseConfig
-
         PoseConfig(head="dense", flip_canon="camera")
 
 
