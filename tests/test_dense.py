@@ -226,12 +226,14 @@ def test_model_symmetry_reads_bop_annotations():
 
 
 # ---------------------------------------------------------------- training, resume, inference
-def _predict_proper_poses(ds, run, out, n_rows: int, z_range: tuple[float, float]) -> None:
-    """``predict-pose`` of ``run`` on ``ds`` writes ``n_rows`` scored rows of proper rotations whose
-    translations are finite with a depth inside ``z_range`` (metres: the robust fit puts them on the cloud)."""
+def _predict_proper_poses(ds, run, out, n_rows: int, z_range: tuple[float, float], extra: tuple = ()) -> None:
+    """``predict-pose`` of ``run`` on ``ds`` (with the arguments ``extra``) writes ``n_rows`` scored rows of proper
+    rotations whose translations are finite with a depth inside ``z_range`` (metres: the robust fit puts them on
+    the cloud)."""
     from sixdpose.artifacts.poses import read_results
 
-    assert main(["predict-pose", "--data", str(ds), "--pose", str(run), "--out", str(out), "--no-progress"]) == 0
+    assert main(["predict-pose", "--data", str(ds), "--pose", str(run), "--out", str(out), "--no-progress",
+                 *extra]) == 0
     rows = read_results(out)
     assert len(rows) == n_rows and all(r.score > 0 for r in rows)
     for r in rows:
@@ -705,7 +707,7 @@ def test_geometry_only_run_names_the_turn_by_the_model_colours(tmp_path):
         inst = SimpleNamespace(obj_id=2, points=p_C[near], colors=cols[near], score=1.0)
         d = canonical_flip(R, fl)
         Rc, tc = R @ fl.R[d], R @ fl.t[d] + t  # what the fit of canonical coordinates gives
-        assert est._colour_flip(inst, Rc, tc, 0) == d
+        assert est._colour_flip(inst, Rc, tc, 0) == (d, -1)
         named.add(d)
         Rb, tb = unflip(Rc, tc, fl.R[d], fl.t[d])
         assert np.allclose(Rb, R, atol=1e-6) and np.allclose(tb, t, atol=1e-6)
@@ -714,6 +716,50 @@ def test_geometry_only_run_names_the_turn_by_the_model_colours(tmp_path):
     assert not by_classifier.colour_flips
     assert not Estimator(tmp_path / "r", device="cpu").colour_flips  # no reader: no model colours (a warning)
     _predict_proper_poses(ds, tmp_path / "r", tmp_path / "res.csv", 2, (0.4, 0.7))
+
+
+def test_colour_slides_name_where_along_its_long_axis_a_partly_seen_box_is(tmp_path):
+    """``colour_slides``: with the turns named by colour, each turn is also scored slid along an elongated model's
+    longest axis (the verification's slides). A 10 cm box seen only from x > -2 cm and fitted 2 cm along its
+    length from the truth: the slide back is named, with the turn; the fitted pose itself is kept when it is
+    right; ``colour_slides=0`` and a model not elongated enough score no slides."""
+    from types import SimpleNamespace
+
+    from sixdpose.datasets.readers import open_dataset
+    from sixdpose.geometry import X_from
+    from sixdpose.pose.dense import canonical_flip, shape_flips
+    from sixdpose.pose.infer import Estimator
+    from sixdpose.pose.train import train_pose
+
+    ds, P = _box_dataset(tmp_path / "box", colours=True)
+    train_pose(ds, tmp_path / "r", profile="smoke", progress=False, **dict(DENSE, flips=4, appearance="local"))
+    reader = open_dataset(ds)
+    est = Estimator(tmp_path / "r", reader=reader, device="cpu")  # colour_slides=3, the default
+    S = est._slides(2)
+    assert S.shape == (6, 4, 4) and np.allclose(S[:, :3, :3], np.eye(3))
+    assert np.allclose(np.abs(S[:, :3, 3]).max(axis=1), [0.01, 0.01, 0.02, 0.02, 0.03, 0.03], atol=1e-3)
+    assert len(Estimator(tmp_path / "r", reader=reader, device="cpu", overrides={"colour_slides": 0})._slides(2)) == 0
+    narrow = Estimator(tmp_path / "r", reader=reader, device="cpu",
+                       overrides={"colour_slides": 3, "verify_slide_min_elong": 2.0})
+    assert len(narrow._slides(2)) == 0  # 10 x 6 cm: not twice as long as wide
+    fl = shape_flips(reader.model(2), 4)
+    cols = _quadrant_colours(P)
+    R, t = Rotation.from_rotvec([0.3, -0.25, 0.2]).as_matrix() @ fl.R[1], np.array([0.0, 0.01, 0.55])
+    seen = P[:, 0] > -0.02  # one end hidden (the model's x is its long axis)
+    p_C = P[seen] @ R.T + t
+    front = p_C[:, 2] < np.percentile(p_C[:, 2], 50)
+    inst = SimpleNamespace(obj_id=2, points=p_C[front], colors=cols[seen][front], score=1.0)
+    d = canonical_flip(R, fl)
+    Rc, tc = R @ fl.R[d], R @ fl.t[d] + t  # the canonical fit of the true pose
+    assert est._colour_flip(inst, Rc, tc, 0, S) == (d, -1)
+    off = tc + R @ np.array([0.02, 0.0, 0.0])  # the canonical fit 2 cm along the box's length
+    dn, s = est._colour_flip(inst, Rc, off, 0, S)
+    assert dn == d and s >= 0
+    back = X_from(*est._turned(Rc, off, 0, dn)) @ S[s]  # as _dense_poses: the named turn, then the slide
+    assert np.allclose(back[:3, :3], R, atol=1e-6) and np.linalg.norm(back[:3, 3] - t) < 1e-3  # the samples' axis
+    assert est._colour_flip(inst, Rc, off, 0)[1] == -1  # no slides given: none named
+    for extra in ((), ("--icp",), ("--set", "colour_slides=0")):
+        _predict_proper_poses(ds, tmp_path / "r", tmp_path / "res.csv", 2, (0.4, 0.7), extra)
 
 
 def test_pca_input_frame_makes_the_dense_head_blind_to_turns_of_the_view(tmp_path):
@@ -789,9 +835,9 @@ def test_with_icp_the_colours_name_the_turn_after_icp(tmp_path, monkeypatch):
     d = canonical_flip(R, fl)
     Rc, tc = R @ fl.R[d], R @ fl.t[d] + t
     off = tc + Rc @ np.array([0.0, -0.03, 0.0])  # 3 cm across the box, half its width
-    assert est._colour_flip(inst, Rc, off, 0) != d
+    assert est._colour_flip(inst, Rc, off, 0)[0] != d
     Ri, ti = est._icp(inst, Rc, off)
-    assert np.linalg.norm(ti - tc) < 0.005 and est._colour_flip(inst, Ri, ti, 0) == d
+    assert np.linalg.norm(ti - tc) < 0.005 and est._colour_flip(inst, Ri, ti, 0) == (d, -1)
     calls = []
     icp = est._icp
     est._icp = lambda *a: calls.append(1) or icp(*a)

@@ -120,6 +120,16 @@ class PoseConfig(FrameSchedule):
             of the fitted pose when ``predict-pose --icp``; the classifier where the model has no colours)
             or ``auto`` (``colour`` without the CNN,
             ``classifier`` with it).
+        colour_slides: with the turns named by colour (``flip_choice``), also score each turn slid along an
+            elongated model's longest principal axis by ``k x verify_slide_rel`` x its extent along it,
+            ``k = +-1 .. +-colour_slides``, for a model at least ``verify_slide_min_elong`` times as long
+            along it as along the second (the verification's slides,
+            :func:`~sixdpose.registration.hypotheses.slides`, settings from
+            :data:`~sixdpose.registration.LEARNED_VERIFY`), and keep the best: a partly hidden bottle's
+            visible part matches its body's geometry at its middle as well as at its end, its print does
+            not. 0: no slides (every run before session 29). An inference field (``predict-pose --set
+            colour_slides=N``); the default 3 was chosen by a rule fixed before its scores, on generated
+            frames and the YCB-Video sample's tuning scene (docs/pose.md, "Slides named by colour").
         input_frame: the frame in which the dense head sees the centred cloud: ``camera`` (as sampled) or
             ``pca`` (turned into the cloud's own principal axes, :func:`~sixdpose.pose.model.pca_frame`, so
             the input no longer changes when the object turns with respect to the camera and the
@@ -178,6 +188,7 @@ class PoseConfig(FrameSchedule):
     flip_weight: float = bounded(0.1, min=0, max=100)
     appearance: str = "cnn"
     flip_choice: str = "auto"
+    colour_slides: int = bounded(3, min=0, max=20)
     input_frame: str = "camera"
     flip_canon: str = "frame"
     rgb_noise: float = bounded(0.3, min=0, max=1)

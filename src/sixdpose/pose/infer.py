@@ -91,7 +91,8 @@ def _orthonormalise(R: np.ndarray) -> np.ndarray:
 
 #: Fields of a pose run's :class:`~.config.PoseConfig` that ``predict-pose --set`` may change: they act
 #: on the points sampled per instance at inference, not on the network's shapes.
-INFERENCE_FIELDS = ("num_points", "min_points", "ransac_threshold", "ransac_iterations", "flip_choice")
+INFERENCE_FIELDS = ("num_points", "min_points", "ransac_threshold", "ransac_iterations", "flip_choice",
+                    "colour_slides")
 
 #: Smallest score of a verified pose (``predict-pose --verify`` writes the verification's score; the
 #: evaluation reads a score <= 0 as "no estimate", which a low verification score must not become).
@@ -230,6 +231,7 @@ class Estimator:
         self.unseen = {int(c[0]) for k, c in enumerate(self.classes) if seen is not None and float(seen[k]) == 0}
         self.icp, self.colour_verify, self.verify, self.reader = icp, colour_verify, verify, reader
         self._diameters: dict[int, float] = {}
+        self._slide_cache: dict[int, np.ndarray] = {}  # obj_id -> colour_slides' motions (_slides)
         self.score_thresh, self.seed, self.max_batch = score_thresh, seed, max_batch
         self._cache = None
         self.onboarding_s = 0.0
@@ -249,9 +251,10 @@ class Estimator:
 
             warmup_colour()
         if icp or colour_verify or verify or self.colour_flips:
-            from ..registration import ReferenceCache, get_preset
+            from ..registration import LEARNED_VERIFY, ReferenceCache, get_preset
 
-            self.reg_cfg = get_preset("default", verify=verify, **(verify_fields or {}))
+            # the learned stage's verification defaults (also the colour slides' step and elongation)
+            self.reg_cfg = get_preset("default", verify=verify, **{**LEARNED_VERIFY, **(verify_fields or {})})
             self._symmetric = {int(c[0]) for c in self.classes if len(c) > 2 and c[2]}
             self._texture_off: dict[int, tuple] = {}  # id(cfg) -> (cfg, cfg without the texture search)
             self._cache = ReferenceCache(reader)
@@ -397,7 +400,9 @@ class Estimator:
             R, t, _ = ransac_kabsch(y, inst.cloud, c, threshold=self.cfg.ransac_threshold,
                                     iterations=self.cfg.ransac_iterations, rng=rng)
             ci = int(batch["obj_index"][k])
-            if self.colour_flips and self.icp and int(self.net.flip_n[ci]) > 1 and inst.points is not None:
+            S = self._slides(inst.obj_id) if self.colour_flips else np.zeros((0, 4, 4))
+            if self.colour_flips and self.icp and (int(self.net.flip_n[ci]) > 1 or len(S)) \
+                    and inst.points is not None:
                 # the colours name the turn at a pose that ICP has brought onto the cloud: the canonical fit is
                 # often a couple of centimetres off, enough for the print of the wrong turn to agree better,
                 # and the turns are symmetries of the shape, so one ICP serves them all
@@ -405,14 +410,17 @@ class Estimator:
                 icp_ran = self._cache is not None
             else:
                 icp_ran = False
-            d = self._colour_flip(inst, R, t, ci) if self.colour_flips else None
+            d, s = self._colour_flip(inst, R, t, ci, S) if self.colour_flips else (None, -1)
             d = int(flip[k]) if d is None else d
             if d:  # the coordinates are the canonical turn's: back to the named turn (a near-symmetry of the
                 # shape only, so ICP runs again on it in _post)
                 R, t = self._turned(R, t, ci, d)
+            if s >= 0:  # slid along the model's long axis (colour_slides): ICP runs again on it in _post
+                X = X_from(R, t) @ S[s]
+                R, t = X[:3, :3], X[:3, 3]
             Rs.append(R)
             ts.append(t)
-            done.append(icp_ran and not d)
+            done.append(icp_ran and not d and s < 0)
         return np.stack(Rs), np.stack(ts), np.array(done, bool)
 
     def _icp(self, inst, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -433,21 +441,48 @@ class Estimator:
         return unflip(R, t, self.net.flip_R[ci, d].double().cpu().numpy(),
                       self.net.flip_t[ci, d].double().cpu().numpy())
 
-    def _colour_flip(self, inst, R: np.ndarray, t: np.ndarray, ci: int) -> int | None:
-        """The shape flip (index into the class's turns) whose pose agrees best with the instance's colours
-        (:func:`~sixdpose.registration.colour_scores` of every turn of the canonical pose ``(R, t)``), or None
-        (the classifier decides) when the class has one turn or the model no colours."""
+    def _colour_flip(self, inst, R: np.ndarray, t: np.ndarray, ci: int,
+                     slides: np.ndarray | None = None) -> tuple[int | None, int]:
+        """The shape flip and slide whose pose agrees best with the instance's colours
+        (:func:`~sixdpose.registration.colour_scores` of every turn of the canonical pose ``(R, t)``, each
+        also moved by every one of ``slides``, (S, 4, 4) motions of the object frame, :meth:`_slides`).
+
+        Returns ``(d, s)``: ``d`` the index into the class's turns, or None (the classifier decides) when
+        there is nothing to choose or the model has no colours; ``s`` the index into ``slides``, or -1 for
+        the pose as fitted (ties keep the fitted turn, unslid)."""
         from ..registration import colour_scores
 
         n = int(self.net.flip_n[ci])
-        if n < 2 or inst.points is None or inst.colors is None or self._cache is None:
-            return None
+        S = np.zeros((0, 4, 4)) if slides is None else np.asarray(slides, float).reshape(-1, 4, 4)
+        if (n < 2 and not len(S)) or inst.points is None or inst.colors is None or self._cache is None:
+            return None, -1
         grid, _ = self._cache.colour_grid(inst.obj_id, self.reg_cfg.cv_grid_cells, self.reg_cfg.cv_smooth_rel)
         if grid is None:
-            return None
-        cands = [X_from(R, t)] + [X_from(*self._turned(R, t, ci, d)) for d in range(1, n)]
-        sc = colour_scores(np.stack(cands), inst.points, inst.colors, grid, self._diameter(inst.obj_id), self.reg_cfg)
-        return int(np.argmax(sc)) if np.isfinite(sc).any() else None
+            return None, -1
+        turns = [X_from(R, t)] + [X_from(*self._turned(R, t, ci, d)) for d in range(1, n)]
+        motions = np.concatenate([np.eye(4)[None], S])  # index 0: unslid
+        cands = np.einsum("dij,sjk->dsik", np.stack(turns), motions).reshape(-1, 4, 4)
+        sc = colour_scores(cands, inst.points, inst.colors, grid, self._diameter(inst.obj_id), self.reg_cfg)
+        if not np.isfinite(sc).any():
+            return None, -1
+        d, s = divmod(int(np.argmax(sc)), len(motions))
+        return d, s - 1
+
+    def _slides(self, obj_id: int) -> np.ndarray:
+        """The slides (S, 4, 4) of ``obj_id``'s model along its longest principal axis that the colour naming
+        scores (``colour_slides`` each way, :func:`~sixdpose.registration.hypotheses.slides` with the
+        registration config's ``verify_slide_rel`` and ``verify_slide_min_elong``); none (0, 4, 4) when
+        ``colour_slides`` is 0, the model is not elongated, or there is no reader. Cached per object."""
+        n = int(getattr(self.cfg, "colour_slides", 0))
+        if n <= 0 or self._cache is None:
+            return np.zeros((0, 4, 4))
+        if obj_id not in self._slide_cache:
+            from ..registration.hypotheses import model_surface, slides
+
+            surface, _ = model_surface(self._cache, obj_id, self.reg_cfg)
+            self._slide_cache[obj_id] = slides(surface, n, self.reg_cfg.verify_slide_rel,
+                                               self.reg_cfg.verify_slide_min_elong)
+        return self._slide_cache[obj_id]
 
     def _diameter(self, obj_id: int) -> float:
         """The object's diameter in metres from the reader's model (0.0 without a reader): the depth band
