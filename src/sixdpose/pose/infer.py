@@ -473,15 +473,13 @@ class Estimator:
         scores (``colour_slides`` each way, :func:`~sixdpose.registration.hypotheses.slides` with the
         registration config's ``verify_slide_rel`` and ``verify_slide_min_elong``); none (0, 4, 4) when
         ``colour_slides`` is 0, the model is not elongated, or there is no reader. Cached per object."""
-        n = int(getattr(self.cfg, "colour_slides", 0))
+        n = int(self.cfg.colour_slides)
         if n <= 0 or self._cache is None:
             return np.zeros((0, 4, 4))
         if obj_id not in self._slide_cache:
-            from ..registration.hypotheses import model_surface, slides
+            from ..registration import model_slides
 
-            surface, _ = model_surface(self._cache, obj_id, self.reg_cfg)
-            self._slide_cache[obj_id] = slides(surface, n, self.reg_cfg.verify_slide_rel,
-                                               self.reg_cfg.verify_slide_min_elong)
+            self._slide_cache[obj_id] = model_slides(self._cache, obj_id, self.reg_cfg, n)
         return self._slide_cache[obj_id]
 
     def _diameter(self, obj_id: int) -> float:

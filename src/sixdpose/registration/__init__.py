@@ -23,11 +23,12 @@ __all__ = [
     "RegistrationError",
     "estimate_pose", "get_preset", "instance_seed", "kabsch_batch", "prepare_scene", "refine_icp", "refine_pose",
     "register_fgr", "register_ransac", "register_super4pcs", "run_registration", "verify_hypotheses", "colour_scores",
-    "warmup_colour",
+    "warmup_colour", "model_slides",
 ]
 
 # lazy: super4pcs imports scipy.spatial and hypotheses Numba, which building the CLI parser need not load
-__getattr__ = lazy_getattr(__name__, by_module(super4pcs=("kabsch_batch",), hypotheses=("Frame", "verify_hypotheses"),
+__getattr__ = lazy_getattr(__name__, by_module(super4pcs=("kabsch_batch",),
+                                                  hypotheses=("Frame", "model_slides", "verify_hypotheses"),
                                                   verify=("colour_scores",)))
 
 

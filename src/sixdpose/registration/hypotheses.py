@@ -234,6 +234,14 @@ def slides(surface: Surface, n_slides: int, step_rel: float, min_elong: float = 
     return np.stack(out) if out else np.zeros((0, 4, 4))
 
 
+def model_slides(cache: ReferenceCache, obj_id: int, cfg: RegistrationConfig, n_slides: int) -> np.ndarray:
+    """The :func:`slides` (S, 4, 4) of ``obj_id``'s model (its cached :func:`model_surface`), ``n_slides`` each
+    way by ``cfg.verify_slide_rel`` x its extent, none when it is not ``cfg.verify_slide_min_elong`` times as
+    long along its first principal axis as along its second (the learned stage's colour-named slides)."""
+    surface, _ = model_surface(cache, obj_id, cfg)
+    return slides(surface, n_slides, cfg.verify_slide_rel, cfg.verify_slide_min_elong)
+
+
 class _ColourGrid:
     """A voxel grid over a model's samples ``P`` (M, 3) with colours ``C`` (M, 3): per cell the distance to
     the nearest sample and that sample's colour, so that posing the samples and reading the grid replaces a
