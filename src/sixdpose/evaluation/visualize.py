@@ -45,7 +45,8 @@ def plot_cases(reader, result, n_good: int = 3, n_bad: int = 3, ncols: int = 3, 
     n = max(len(cases), 1)
     ncols = min(ncols, n)
     nrows = math.ceil(n / ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(3.4 * ncols, 2.8 * nrows), squeeze=False)
+    # constrained layout: tight_layout let each lower row's titles overlap the images above (fixed-aspect axes)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(3.4 * ncols, 2.8 * nrows), squeeze=False, layout="constrained")
     for ax in axes.flat:
         ax.axis("off")
     for ax, r in zip(axes.flat, cases, strict=False):  # the grid may have more axes than cases
@@ -59,5 +60,4 @@ def plot_cases(reader, result, n_good: int = 3, n_bad: int = 3, ncols: int = 3, 
                   max_points=max_points)
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
     return fig

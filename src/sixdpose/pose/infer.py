@@ -202,9 +202,11 @@ class Estimator:
                 order. refiner, refiner_cfg: Refiner and its RefinerConfig, or None. The other arguments
                 as in :class:`Estimator` (no ICP or colour verification).
         """
+        from ..registration import LEARNED_VERIFY
+
         est = cls.__new__(cls)
         est._setup(posenet, cfg, classes, refiner, refiner_cfg, torch.device(device), iterations, False, False, reader,
-                   score_thresh, seed, max_batch)
+                   score_thresh, seed, max_batch, verify_fields=dict(LEARNED_VERIFY))
         est.pose_ckpt, est.refiner_ckpt = None, None
         est._setup_fallback(None, "fast", None)
         return est
@@ -251,10 +253,10 @@ class Estimator:
 
             warmup_colour()
         if icp or colour_verify or verify or self.colour_flips:
-            from ..registration import LEARNED_VERIFY, ReferenceCache, get_preset
+            from ..registration import ReferenceCache, get_preset
 
             # the learned stage's verification defaults (also the colour slides' step and elongation)
-            self.reg_cfg = get_preset("default", verify=verify, **{**LEARNED_VERIFY, **(verify_fields or {})})
+            self.reg_cfg = get_preset("default", verify=verify, **(verify_fields or {}))
             self._symmetric = {int(c[0]) for c in self.classes if len(c) > 2 and c[2]}
             self._texture_off: dict[int, tuple] = {}  # id(cfg) -> (cfg, cfg without the texture search)
             self._cache = ReferenceCache(reader)
