@@ -67,10 +67,11 @@ $(IMAGENET_WEIGHTS): | $(VENV_OK)
 endif
 
 # ---- segmentation ------------------------------------------------------------------------------
-# train-seg writes model.pt last; an interrupted run (last.pt only) is resumed
+# train-seg writes model.pt last; an interrupted run (its config.json is written first, last.pt after each
+# epoch) is resumed, also one stopped before its first epoch ended (no last.pt yet)
 $(RUNS)/seg/model.pt: $(TRAIN_DIR)/manifest.json | $(VENV_OK) $(IMAGENET_WEIGHTS)
 	$(SIXDPOSE) train-seg --data $(TRAIN_DIR) --out $(@D) --no-progress \
-	  $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_SEG))
+	  $(if $(wildcard $(@D)/config.json),--resume,--profile $(P_SEG))
 
 $(RUNS)/masks/%/meta.json: $(RUNS)/seg/model.pt | $(VENV_OK)
 	$(SIXDPOSE) segment --data $(DATA_$*) --seg $(RUNS)/seg --out $(@D) --no-progress
@@ -88,7 +89,7 @@ $(RUNS)/seg/pred_test/meta.json: $(RUNS)/seg/model.pt $(TRAIN_DIR)/manifest.json
 ifneq ($(SEG_FAST_$(PROFILE)),)
 $(RUNS)/seg_fast/model.pt: $(TRAIN_DIR)/manifest.json | $(VENV_OK)
 	$(SIXDPOSE) train-seg --data $(TRAIN_DIR) --out $(@D) --no-progress \
-	  $(if $(wildcard $(@D)/last.pt),--resume,$(SEG_FAST_$(PROFILE)))
+	  $(if $(wildcard $(@D)/config.json),--resume,$(SEG_FAST_$(PROFILE)))
 
 $(RUNS)/masks_fast/test/meta.json: $(RUNS)/seg_fast/model.pt $(DATA_test)/manifest.json | $(VENV_OK)
 	$(SIXDPOSE) segment --data $(DATA_test) --seg $(RUNS)/seg_fast --out $(@D) --no-progress
@@ -100,17 +101,17 @@ endif
 _val = $(if $(VAL_DIR),--val $(VAL_DIR))
 $(RUNS)/pose/model.pt: $(TRAIN_DIR)/manifest.json $(if $(VAL_DIR),$(VAL_DIR)/manifest.json) | $(VENV_OK)
 	$(SIXDPOSE) train-pose --data $(TRAIN_DIR) --out $(@D) $(_val) --no-progress \
-	  $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_POSE))
+	  $(if $(wildcard $(@D)/config.json),--resume,--profile $(P_POSE))
 
 $(RUNS)/refiner/model.pt: $(RUNS)/pose/model.pt $(TRAIN_DIR)/manifest.json $(if $(VAL_DIR),$(VAL_DIR)/manifest.json) | $(VENV_OK)
 	$(SIXDPOSE) train-refiner --pose $(RUNS)/pose --data $(TRAIN_DIR) --out $(@D) $(_val) --no-progress \
-	  $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_POSE))
+	  $(if $(wildcard $(@D)/config.json),--resume,--profile $(P_POSE))
 
 # the dense head (the project's own method, rows `dense` and `dense_icp`) on the same training data, with the
 # recipe of DENSE_$(PROFILE) (that of the synthetic-to-real dense head); no per-epoch validation
 $(RUNS)/pose_dense/model.pt: $(TRAIN_DIR)/manifest.json | $(VENV_OK)
 	$(SIXDPOSE) train-pose --data $(TRAIN_DIR) --out $(@D) --no-progress \
-	  $(if $(wildcard $(@D)/last.pt),--resume,$(DENSE_$(PROFILE)))
+	  $(if $(wildcard $(@D)/config.json),--resume,$(DENSE_$(PROFILE)))
 
 # the ablation of notebook 05 (each option of the paper's architecture changed alone, the budget of
 # ABLATION_$(PROFILE)), scored on the validation split (smoke, demo: the test split's images)
@@ -241,7 +242,7 @@ $(foreach r,pose_ycbv pose_ycbv_ideal,$(eval $(RUNS)/$(subst pose,refiner,$(r))/
 # the dense head (the project's own method): trained once, on kinect depth, with the sim-to-real augmentation
 $(RUNS)/pose_ycbv_dense/model.pt: data/ycbv/manifest.json | $(VENV_OK)
 	$(SIXDPOSE) train-pose --data data/ycbv --out $(@D) --no-progress \
-	  $(if $(wildcard $(@D)/last.pt),--resume,$(YCBV_DENSE_$(PROFILE)))
+	  $(if $(wildcard $(@D)/config.json),--resume,$(YCBV_DENSE_$(PROFILE)))
 # method -> command and the runs it needs
 YCBV_CMD_learned              := predict-pose --pose $(RUNS)/pose_ycbv
 YCBV_CMD_learned_it2          := predict-pose --pose $(RUNS)/pose_ycbv --refiner $(RUNS)/refiner_ycbv --iterations 2
@@ -290,10 +291,10 @@ YCBV_SMALL := data/ycbv_$(PROFILE)
 $(YCBV_SMALL)/manifest.json: | $(VENV_OK)
 	$(SIXDPOSE) generate --profile ycbv --scenes 2 --views 3 --out $(@D) --workers $(WORKERS) --no-progress
 $(RUNS)/pose_ycbv/model.pt: $(YCBV_SMALL)/manifest.json | $(VENV_OK)
-	$(SIXDPOSE) train-pose --data $(YCBV_SMALL) --out $(@D) --no-progress $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_POSE))
+	$(SIXDPOSE) train-pose --data $(YCBV_SMALL) --out $(@D) --no-progress $(if $(wildcard $(@D)/config.json),--resume,--profile $(P_POSE))
 $(RUNS)/refiner_ycbv/model.pt: $(RUNS)/pose_ycbv/model.pt $(YCBV_SMALL)/manifest.json | $(VENV_OK)
 	$(SIXDPOSE) train-refiner --pose $(RUNS)/pose_ycbv --data $(YCBV_SMALL) --out $(@D) --no-progress \
-	  $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_POSE))
+	  $(if $(wildcard $(@D)/config.json),--resume,--profile $(P_POSE))
 YCBV_STAGES := $(YCBV_SMALL)/manifest.json $(RUNS)/pose_ycbv/model.pt $(RUNS)/refiner_ycbv/model.pt
 NB09_ARGS := -p TRAIN_DATA ../$(YCBV_SMALL) -p POSE_RUN ../$(RUNS)/pose_ycbv -p REFINER_RUN ../$(RUNS)/refiner_ycbv \
 	-p POSE_PROFILE $(P_POSE)
@@ -305,7 +306,7 @@ ifneq ($(strip $(LMO)),)
 DATA_lmo := $(LMO)
 $(RUNS)/lmo_seg/model.pt: | $(VENV_OK) $(IMAGENET_WEIGHTS)
 	$(SIXDPOSE) train-seg --data $(LMO) --train-split $(LMO_TRAIN_SPLIT) --test-split $(LMO_SPLIT) --out $(@D) \
-	  --no-progress $(if $(wildcard $(@D)/last.pt),--resume,--profile $(P_SEG))
+	  --no-progress $(if $(wildcard $(@D)/config.json),--resume,--profile $(P_SEG))
 $(RUNS)/masks/lmo/meta.json: $(RUNS)/lmo_seg/model.pt
 	$(SIXDPOSE) segment --data $(LMO) --split $(LMO_SPLIT) --seg $(RUNS)/lmo_seg --out $(@D) --no-progress
 

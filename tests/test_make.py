@@ -307,3 +307,18 @@ def test_make_tables_on_the_committed_results_writes_no_result(tmp_path):
     again = subprocess.run(["make", "-q", goal, "PROFILE=cpu", "-o", ".venv/.synced", "-o", ".venv/.apt"],
                            cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert again.returncode == 0  # up to date: a second run does nothing
+
+
+def test_a_run_stopped_before_its_first_checkpoint_is_resumed_not_refused(tmp_path):
+    """A training run killed before its first epoch ended holds ``config.json`` but no ``last.pt``; the
+    trainers refuse a fresh start into it ("already holds a run; use --resume"), so the graph must resume it."""
+    target = f"{tmp_path}/seg_fast/model.pt"
+    fresh = _plan(target, "PROFILE=cpu", f"RUNS={tmp_path}")
+    assert fresh.returncode == 0, fresh.stderr
+    assert "--resume" not in fresh.stdout and "--set backbone=mobilenet_v3_large" in fresh.stdout
+    (tmp_path / "seg_fast").mkdir()
+    (tmp_path / "seg_fast" / "config.json").write_text("{}")
+    started = _plan(target, "PROFILE=cpu", f"RUNS={tmp_path}")
+    assert started.returncode == 0, started.stderr
+    line = next(x for x in started.stdout.split(".venv/bin/sixdpose ") if x.startswith("train-seg"))
+    assert "--resume" in line and "--profile" not in line
