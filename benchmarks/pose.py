@@ -61,7 +61,9 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
 from sixdpose.artifacts.results import add_result_arguments, save_from_args, script_command  # noqa: E402
+from sixdpose.config import parse_overrides  # noqa: E402
 from sixdpose.datasets.base import Instance, Sample  # noqa: E402
+from sixdpose.errors import ConfigError  # noqa: E402
 from sixdpose.options import Int  # noqa: E402
 from sixdpose.pose import checkpoint as ck  # noqa: E402
 from sixdpose.pose.config import APPEARANCES, profile_config, refiner_profile_config  # noqa: E402
@@ -98,9 +100,12 @@ def synthetic_frame(n: int, seed: int = 0) -> Sample:
     return Sample(0, 0, rgb, depth, K, insts)
 
 
-def fake_runs(profile: str, tmp: Path, classes: int = 21, head: str = "paper", appearance: str = "cnn"):
-    """Untrained pose and refiner checkpoints of a profile (for timing only; no refiner for the dense head)."""
-    cfg, rcfg = profile_config(profile, {"head": head, "appearance": appearance}), refiner_profile_config(profile)
+def fake_runs(profile: str, tmp: Path, classes: int = 21, head: str = "paper", appearance: str = "cnn",
+              overrides: dict | None = None):
+    """Untrained pose and refiner checkpoints of a profile (for timing only; no refiner for the dense head);
+    ``overrides``: pose config fields replacing the profile's."""
+    cfg = profile_config(profile, {"head": head, "appearance": appearance, **(overrides or {})})
+    rcfg = refiner_profile_config(profile)
     cls = [[i + 1, f"obj{i + 1}", False] for i in range(classes)]
     torch.manual_seed(0)  # the same untrained weights every run
     net, ref = build_posenet(cfg, classes), build_refiner(rcfg, classes, cfg.emb_dim)
@@ -203,14 +208,25 @@ def train_throughput(profile: str, device, steps: int, inst_per_image: int = 6, 
     return res
 
 
+def load_slides(path: str | None) -> dict[int, np.ndarray]:
+    """The colour-named slides saved by ``--save-slides`` (obj_id -> (S, 4, 4)), or {} without a path."""
+    if not path:
+        return {}
+    with np.load(path) as z:
+        return {int(k.removeprefix("obj_")): z[k] for k in z.files}
+
+
 def inference_fps(pose, refiner, device, instances: int, frames: int, data: str | None = None,
-                  repeats: int = 1) -> dict:
+                  repeats: int = 1, slides: dict | None = None, amp: bool | None = None) -> dict:
     """Frames per second of Estimator.predict (pose net + 2 refinement iterations, or the dense head's robust
     fit when ``refiner`` is None) on a synthetic frame of ``instances`` objects, or with ``data`` (``PATH`` or
     ``PATH@SPLIT``) on its first ``frames`` frames with their ground-truth masks, the reader given to the
-    estimator (so a run naming its flips by the models' colours does so; disk reads not timed)."""
+    estimator (so a run naming its flips by the models' colours does so; disk reads not timed). ``slides``:
+    colour-named slides built elsewhere (:func:`load_slides`), for a machine without Open3D. ``amp``: half
+    precision on a GPU (:attr:`Estimator.amp`; None: the estimator's default)."""
     if data is None:
         est = Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device))
+        est.amp = est.amp if amp is None else amp
         samples = [synthetic_frame(instances)] * (frames + 1)
     else:
         from sixdpose.datasets import as_reader
@@ -219,6 +235,8 @@ def inference_fps(pose, refiner, device, instances: int, frames: int, data: str 
         reader = as_reader(path, split=split or "test")
         samples = [reader.load(k) for k in reader.keys()[: frames + 1]]
         est = Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device), reader=reader)
+        est.preload_slides(slides or {})
+        est.amp = est.amp if amp is None else amp
     for s in samples if data is not None else samples[:1]:  # warm-up: first-call allocations, and with
         est.predict(s)  # --data each object's onboarding (model reads, model-side data), not timed
     times, means = median_pass(lambda s: est.predict(s), samples[1:], device, repeats)
@@ -227,14 +245,15 @@ def inference_fps(pose, refiner, device, instances: int, frames: int, data: str 
             "infer_instances_per_frame": n_inst, **(spread(means, "infer") if repeats > 1 else {})}
 
 
-def untrained_seg(profile: str, pose, tmp: Path) -> Path:
-    """An untrained Mask R-CNN checkpoint of segmentation profile ``profile`` with the pose run's classes
-    (for timing only: :func:`end_to_end_fps` with ``untrained=True``)."""
+def untrained_seg(profile: str, pose, tmp: Path, backbone: str | None = None) -> Path:
+    """An untrained Mask R-CNN checkpoint of segmentation profile ``profile`` (its ``backbone`` replaced when
+    given, as ``SEG_FAST_cpu`` in mk/profiles.mk does) with the pose run's classes (for timing only:
+    :func:`end_to_end_fps` with ``untrained=True``)."""
     from sixdpose.segmentation import checkpoint as seg_ck
     from sixdpose.segmentation.config import profile_config as seg_profile_config
     from sixdpose.segmentation.model import build_model
 
-    cfg = seg_profile_config(profile, pretrained=False)
+    cfg = seg_profile_config(profile, pretrained=False, **({"backbone": backbone} if backbone else {}))
     classes = [[int(c[0]), str(c[1])] for c in ck.load(pose, kind="pose")["classes"]]
     torch.manual_seed(0)  # the same untrained weights every run
     model, init = build_model(cfg, len(classes), verbose=False)
@@ -243,11 +262,14 @@ def untrained_seg(profile: str, pose, tmp: Path) -> Path:
 
 
 def end_to_end_fps(seg, pose, refiner, data, device, frames: int, untrained: bool = False,
-                   compile_seg: bool | None = None, repeats: int = 1) -> dict:
+                   compile_seg: bool | None = None, repeats: int = 1, slides: dict | None = None,
+                   amp: bool | None = None, seg_overrides: dict | None = None) -> dict:
     """Frames per second of segmentation + pose + 2 refinement iterations on a dataset's first frames.
 
     ``compile_seg``: the Segmenter's ``optimise`` (None: its default, compiled on the CPU). ``repeats``:
-    timed passes over the frames; the median pass is reported (:func:`median_pass`).
+    timed passes over the frames; the median pass is reported (:func:`median_pass`). ``slides``: as
+    :func:`inference_fps`. ``amp``: as :func:`inference_fps`. ``seg_overrides``: the Segmenter's inference
+    fields to change (``--seg-set``, e.g. ``amp=false``).
 
     ``untrained``: ``seg`` is an untrained network (:func:`untrained_seg`): it is made to return as many
     detections as each frame has objects, and the pose stage runs on the ground-truth masks."""
@@ -260,8 +282,11 @@ def end_to_end_fps(seg, pose, refiner, data, device, frames: int, untrained: boo
     samples = [reader.load(k, masks=untrained) for k in reader.keys()[: frames + 1]]  # disk reads not timed
     est = Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device),
                     reader=reader)  # scores >= 0.5, as predict-pose; the reader for flips named by colour
+    est.preload_slides(slides or {})
+    est.amp = est.amp if amp is None else amp
     if untrained:  # one network per detection count, each returning exactly that many
-        segms = {n: Segmenter(seg, device=str(device), score_thresh=0.0, overrides={"detections_per_img": n},
+        segms = {n: Segmenter(seg, device=str(device), score_thresh=0.0,
+                              overrides={**(seg_overrides or {}), "detections_per_img": n},
                               optimise=compile_seg)
                  for n in {max(len(s.instances), 1) for s in samples}}
 
@@ -270,7 +295,8 @@ def end_to_end_fps(seg, pose, refiner, data, device, frames: int, untrained: boo
             return est.predict(sample), len(out["labels"])
     else:  # detections below the pose stage's score are dropped before their masks are pasted: the estimator
         # ignores them anyway, and a box kept by the score floor is never suppressed by a lower-scored one
-        segm = Segmenter(seg, device=str(device), score_thresh=est.score_thresh, optimise=compile_seg)
+        segm = Segmenter(seg, device=str(device), score_thresh=est.score_thresh, optimise=compile_seg,
+                         overrides=seg_overrides)
 
         def run(sample):
             out = segm.predict([sample.rgb])[0]
@@ -318,13 +344,31 @@ def main(argv=None) -> int:
     ap.add_argument("--seg-profile", default=None, choices=("smoke", "cpu", "paper"),
                     help="time end to end with an untrained Mask R-CNN of this segmentation profile instead of "
                          "--seg (detections fixed to the frame's objects, pose on GT masks)")
+    ap.add_argument("--seg-backbone", default=None,
+                    help="with --seg-profile: that profile's Mask R-CNN with this backbone instead (e.g. "
+                         "mobilenet_v3_large, the cpu graph's real-time segmenter)")
+    ap.add_argument("--seg-set", action="append", default=[], metavar="FIELD=VALUE",
+                    help="an inference field of the Mask R-CNN to change (repeatable; e.g. amp=false)")
     ap.add_argument("--data", default=None,
                     help="PATH[@SPLIT]: time inference on its first --frames frames (GT masks; with --seg, end to "
                          "end on the segmentation's masks as well) instead of a synthetic frame")
+    ap.add_argument("--slides", default=None,
+                    help="an .npz of the colour-named slides (from --save-slides on a machine with Open3D): used "
+                         "instead of building them, so a machine without Open3D runs the same poses")
+    ap.add_argument("--amp", action=argparse.BooleanOptionalAction, default=None,
+                    help="the pose networks in half precision (autocast) on a GPU, or with --no-amp in float32; "
+                         "default: the estimator's (Estimator.amp: half for the paper head, float32 for the dense)")
+    ap.add_argument("--fp32", dest="amp", action="store_false", help="the same as --no-amp")
+    ap.add_argument("--save-slides", default=None,
+                    help="write the colour-named slides of --data's objects (first --frames + 1 frames) to this "
+                         ".npz and stop (needs Open3D)")
     add_result_arguments(ap, None, Path(__file__).resolve().parents[1] / "results", "pose_<profile>_<device>")
     a = ap.parse_args(argv)
     if a.seg and a.seg_profile:
         print("--seg and --seg-profile exclude each other", file=sys.stderr)
+        return 2
+    if a.seg_backbone and not a.seg_profile:
+        print("--seg-backbone needs --seg-profile", file=sys.stderr)
         return 2
     seg_any = a.seg or a.seg_profile
     if (seg_any and a.data is None) or (seg_any and not a.pose) or (a.data and not a.pose):
@@ -339,6 +383,28 @@ def main(argv=None) -> int:
     if device.type == "cuda" and not torch.cuda.is_available():
         print("CUDA is not available", file=sys.stderr)
         return 2
+    if a.save_slides:
+        if not (a.pose and a.data):
+            print("--save-slides needs --pose and --data", file=sys.stderr)
+            return 2
+        from sixdpose.datasets import as_reader
+
+        path, _, split = a.data.partition("@")
+        reader = as_reader(path, split=split or "test")
+        objs = sorted({g.obj_id for k in reader.keys()[: a.frames + 1] for g in reader.load(k, masks=False).instances})
+        est = Estimator(a.pose, None, iterations=0, device="cpu", reader=reader)
+        slides = est.export_slides(o for o in objs if o in est.class_index)
+        np.savez(a.save_slides, **{f"obj_{o}": S for o, S in slides.items()})
+        print(f"slides of objects {sorted(slides)} ({sum(len(S) for S in slides.values())} in all) -> {a.save_slides}")
+        return 0
+    slides = load_slides(a.slides)
+    from sixdpose.segmentation.infer import check_inference_overrides
+
+    try:
+        seg_set = check_inference_overrides(parse_overrides(a.seg_set))
+    except ConfigError as e:
+        print(f"--seg-set: {e}", file=sys.stderr)
+        return 2
     head, appearance, step_cfg = a.head, a.appearance, {}
     if a.pose:  # a trained run: its own head, embedding and network (for the training step timed too)
         saved = ck.load(a.pose, kind="pose")["config"]
@@ -351,15 +417,17 @@ def main(argv=None) -> int:
            "threads": torch.get_num_threads()}
     with tempfile.TemporaryDirectory() as tmp:
         pose, ref = (a.pose, a.refiner) if a.pose else fake_runs(a.profile, Path(tmp), head=head, appearance=appearance)
-        out.update(inference_fps(pose, ref, device, a.instances, a.frames, a.data, a.repeats))
+        out.update(inference_fps(pose, ref, device, a.instances, a.frames, a.data, a.repeats, slides, a.amp))
         out["infer_peak_mib"] = peak_mib(device)
         if a.seg:
             out.update(end_to_end_fps(a.seg, pose, ref, a.data, device, a.frames,
-                                      compile_seg=False if a.seg_eager else None, repeats=a.repeats))
+                                      compile_seg=False if a.seg_eager else None, repeats=a.repeats,
+                                      slides=slides, amp=a.amp, seg_overrides=seg_set))
         elif a.seg_profile:
-            seg = untrained_seg(a.seg_profile, pose, Path(tmp))
+            seg = untrained_seg(a.seg_profile, pose, Path(tmp), a.seg_backbone)
             out.update(end_to_end_fps(seg, pose, ref, a.data, device, a.frames, untrained=True,
-                                      compile_seg=False if a.seg_eager else None, repeats=a.repeats))
+                                      compile_seg=False if a.seg_eager else None, repeats=a.repeats,
+                                      slides=slides, amp=a.amp, seg_overrides=seg_set))
         if device.type == "cuda":
             torch.cuda.reset_peak_memory_stats(device)
         out.update(train_throughput(a.profile, device, a.steps, a.instances, head=head, appearance=appearance,
@@ -382,14 +450,17 @@ def main(argv=None) -> int:
                                + (f" on {a.data} (GT masks)" if a.data else "")
                                + ", training instances/s, peak memory"
                                + ("; end to end with segmentation on " + Path(a.data).name if a.seg else "")
-                               + (f"; end to end with an untrained {a.seg_profile} Mask R-CNN (detections fixed "
+                               + (f"; end to end with an untrained {a.seg_profile} Mask R-CNN"
+                                  + (f" ({a.seg_backbone})" if a.seg_backbone else "") + " (detections fixed "
                                   "to the frame's objects, pose on GT masks) on " + Path(a.data).name
                                   if a.seg_profile else ""),
                    config={"profile": a.profile, "head": head, "appearance": appearance, "pose": a.pose,
                            "refiner": a.refiner,
                            "device": a.device, "instances": a.instances, "frames": a.frames, "repeats": a.repeats,
                            "steps": a.steps,
-                           "threads": a.threads, "seg": a.seg, "seg_profile": a.seg_profile, "data": a.data,
+                           "threads": a.threads, "slides": a.slides, "amp": a.amp, "seg": a.seg,
+                           "seg_profile": a.seg_profile,
+                           "seg_backbone": a.seg_backbone, "seg_set": seg_set, "data": a.data,
                            "pose_config": profile_config(a.profile, {"head": head, "appearance": appearance}).to_dict()
                            if not a.pose else None})
     return 0

@@ -65,3 +65,37 @@ def test_repeats_report_the_median_pass_and_the_spread(tmp_path, capsys):
     finally:
         bench.time.perf_counter = real
     assert times == [2.0] and means == [3.0, 1.0, 2.0]
+
+
+def test_slides_saved_where_open3d_is_are_used_instead_of_building_them(tmp_path, monkeypatch, capsys):
+    """--save-slides writes each object's colour-named slides (built from the model with Open3D) and stops;
+    --slides hands them to the estimator, which then never builds them (a lent GPU machine has no Open3D),
+    here with an untrained MobileNetV3 Mask R-CNN (--seg-backbone) in float32 (--seg-set amp=false) and the pose
+    networks in float32 (--fp32); --seg-backbone without --seg-profile, or a --seg-set field that cannot change
+    at inference, is refused with exit status 2."""
+    bench = _bench()
+    data = write_synthetic_dataset(tmp_path / "d", n_images=3)
+    # shape flips named by colour (appearance local, flip_choice auto): the estimator scores the slides
+    pose, _ = bench.fake_runs("smoke", tmp_path, classes=16, head="dense", appearance="local",
+                              overrides={"flips": 4})
+    npz = tmp_path / "slides.npz"
+    base = ["--profile", "smoke", "--pose", str(pose), "--data", str(data), "--frames", "2", "--no-result"]
+    assert bench.main(base + ["--save-slides", str(npz)]) == 0
+    saved = bench.load_slides(str(npz))
+    assert list(saved) == [15] and saved[15].shape[1:] == (4, 4)  # the drill, the dataset's one object
+
+    import sixdpose.registration as reg
+
+    def no_build(*a, **k):
+        raise AssertionError("slides built although they were given")
+
+    monkeypatch.setattr(reg, "model_slides", no_build)
+    out = tmp_path / "out.json"
+    args = base + ["--slides", str(npz), "--seg-profile", "smoke", "--seg-backbone", "mobilenet_v3_large",
+                   "--fp32", "--seg-set", "amp=false", "--steps", "1", "--json", str(out)]
+    assert bench.main(args) == 0
+    assert json.loads(out.read_text())["e2e_frames"] == 2
+    assert bench.main(base + ["--seg-backbone", "mobilenet_v3_large"]) == 2
+    assert "--seg-backbone needs --seg-profile" in capsys.readouterr().err
+    assert bench.main(base + ["--seg-profile", "smoke", "--seg-set", "backbone=resnet50"]) == 2
+    assert "cannot change at inference" in capsys.readouterr().err

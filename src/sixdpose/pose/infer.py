@@ -162,6 +162,10 @@ class Estimator:
             references, colour grids, verification surfaces: the objects' onboarding,
             :class:`~sixdpose.registration.ReferenceCache`); :meth:`predict`'s times leave them out and
             ``settings()`` records them.
+        amp: half precision (autocast) for the networks on a GPU; False runs them in float32 there, as on
+            the CPU (no effect on the CPU). Default: True for the paper head; False for the dense head, whose
+            small network ran its frames faster in float32 on an H200 (the casts cost more than they save:
+            ``benchmarks/device_pose.sh``, docs/pose.md) and whose accuracy figures were all computed in float32.
     Raises:
         CheckpointError: corrupt/incompatible checkpoints, or a refiner of another pose run.
         ConfigError: a bad override.
@@ -234,7 +238,10 @@ class Estimator:
         self.icp, self.colour_verify, self.verify, self.reader = icp, colour_verify, verify, reader
         self._diameters: dict[int, float] = {}
         self._slide_cache: dict[int, np.ndarray] = {}  # obj_id -> colour_slides' motions (_slides)
+        self._flip_host: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # _flips
         self.score_thresh, self.seed, self.max_batch = score_thresh, seed, max_batch
+        # half precision (autocast) on a GPU for the paper head; the dense head in float32 (see the docstring)
+        self.amp = not self.dense
         self._cache = None
         self.onboarding_s = 0.0
         if (icp or colour_verify or verify) and reader is None:
@@ -364,7 +371,7 @@ class Estimator:
                 R, t, icp_done = self._dense_poses(batch, chunk, np.random.default_rng(
                     [self.seed, int(sample.scene_id), int(sample.im_id), 1]))
             else:
-                R, t = run_networks(self.net, self.refiner, batch, self.iterations, self.device, amp=True)
+                R, t = run_networks(self.net, self.refiner, batch, self.iterations, self.device, amp=self.amp)
                 icp_done = np.zeros(len(chunk), bool)
             for inst, Ri, ti, done in zip(chunk, R, t, icp_done, strict=True):
                 Ri = _orthonormalise(Ri)
@@ -390,7 +397,7 @@ class Estimator:
         from .dense import ransac_kabsch
 
         dev = self.device
-        with torch.no_grad(), torch.autocast("cuda", dtype=torch.float16, enabled=dev.type == "cuda"):
+        with torch.no_grad(), torch.autocast("cuda", dtype=torch.float16, enabled=self.amp and dev.type == "cuda"):
             out = self.net(batch["images"].to(dev), batch["img_index"].to(dev), batch["choose"].to(dev),
                            batch["cloud"].to(dev), batch["obj_index"].to(dev))
         coords = out["coords"].float().cpu().double().numpy()
@@ -403,7 +410,7 @@ class Estimator:
                                     iterations=self.cfg.ransac_iterations, rng=rng)
             ci = int(batch["obj_index"][k])
             S = self._slides(inst.obj_id) if self.colour_flips else np.zeros((0, 4, 4))
-            if self.colour_flips and self.icp and (int(self.net.flip_n[ci]) > 1 or len(S)) \
+            if self.colour_flips and self.icp and (int(self._flips()[2][ci]) > 1 or len(S)) \
                     and inst.points is not None:
                 # the colours name the turn at a pose that ICP has brought onto the cloud: the canonical fit is
                 # often a couple of centimetres off, enough for the print of the wrong turn to agree better,
@@ -440,8 +447,16 @@ class Estimator:
         """The canonical pose ``(R, t)`` of class ``ci`` mapped back by its flip ``d`` (:func:`~.dense.unflip`)."""
         from .dense import unflip
 
-        return unflip(R, t, self.net.flip_R[ci, d].double().cpu().numpy(),
-                      self.net.flip_t[ci, d].double().cpu().numpy())
+        flip_R, flip_t, _ = self._flips()
+        return unflip(R, t, flip_R[ci, d], flip_t[ci, d])
+
+    def _flips(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The network's shape flips as host arrays, copied once: ``flip_R`` (C, F, 3, 3), ``flip_t`` (C, F, 3)
+        float64 and ``flip_n`` (C,) int (on a GPU, reading them per instance cost a synchronisation each)."""
+        if self._flip_host is None:
+            self._flip_host = (self.net.flip_R.double().cpu().numpy(), self.net.flip_t.double().cpu().numpy(),
+                               self.net.flip_n.cpu().numpy().astype(int))
+        return self._flip_host
 
     def _colour_flip(self, inst, R: np.ndarray, t: np.ndarray, ci: int,
                      slides: np.ndarray | None = None) -> tuple[int | None, int]:
@@ -454,7 +469,7 @@ class Estimator:
         the pose as fitted (ties keep the fitted turn, unslid)."""
         from ..registration import colour_scores
 
-        n = int(self.net.flip_n[ci])
+        n = int(self._flips()[2][ci])
         S = np.zeros((0, 4, 4)) if slides is None else np.asarray(slides, float).reshape(-1, 4, 4)
         if (n < 2 and not len(S)) or inst.points is None or inst.colors is None or self._cache is None:
             return None, -1
@@ -483,6 +498,18 @@ class Estimator:
 
             self._slide_cache[obj_id] = model_slides(self._cache, obj_id, self.reg_cfg, n)
         return self._slide_cache[obj_id]
+
+    def export_slides(self, obj_ids) -> dict[int, np.ndarray]:
+        """The colour-named slides (S, 4, 4) of each of ``obj_ids`` (:meth:`_slides`; model-side onboarding data,
+        built with Open3D's voxel grid), to be handed to :meth:`preload_slides` of an estimator in a process
+        without Open3D (``benchmarks/device_pose.sh``: a lent GPU machine has none)."""
+        return {int(o): self._slides(int(o)) for o in obj_ids}
+
+    def preload_slides(self, slides: dict) -> None:
+        """Use ``slides`` (obj_id -> (S, 4, 4) motions of the object frame, :meth:`export_slides`) instead of
+        building them from the model: the same poses as the estimator that exported them, without Open3D."""
+        for o, S in slides.items():
+            self._slide_cache[int(o)] = np.asarray(S, dtype=np.float64).reshape(-1, 4, 4)
 
     def _diameter(self, obj_id: int) -> float:
         """The object's diameter in metres from the reader's model (0.0 without a reader): the depth band

@@ -254,7 +254,10 @@ def pca_frame(centred: torch.Tensor, centroid: torch.Tensor) -> torch.Tensor:
     with torch.no_grad(), torch.autocast(centred.device.type, enabled=False):
         x = centred.float()
         cov = x.transpose(1, 2) @ x / max(x.shape[1], 1)
-        _, vec = torch.linalg.eigh(cov)  # ascending eigenvalues
+        # ascending eigenvalues; a batch of 3x3 matrices is decomposed on the CPU (on a GPU the solver's launch
+        # and synchronisation cost more than the work: about a millisecond per batch on an H200)
+        _, vec = torch.linalg.eigh(cov.cpu()) if cov.is_cuda else torch.linalg.eigh(cov)
+        vec = vec.to(cov.device)
         v1, v3 = vec[..., 2], vec[..., 0]
         s1 = torch.sign(((x @ v1[..., None]) ** 3).sum(dim=(1, 2)))
         v1 = v1 * torch.where(s1 == 0, torch.ones_like(s1), s1)[:, None]

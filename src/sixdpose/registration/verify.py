@@ -267,7 +267,7 @@ def colour_scores(
     # SMOOTH_POOL points within the smoothing radius (vectorised: milliseconds on a large mask)
     pool = rng.choice(len(P), size=min(len(P), SMOOTH_POOL), replace=False)
     sel = pool[: min(len(pool), cfg.cv_points)]
-    ch = chroma(colors)[pool]
+    ch = chroma(np.asarray(colors)[pool])  # row by row: only the pooled rows are needed
     k = min(SMOOTH_K, len(pool))
     dist, nb = cKDTree(P[pool]).query(P[sel], k=k, distance_upper_bound=cfg.cv_smooth_rel * diameter)
     dist, nb = dist.reshape(len(sel), k), nb.reshape(len(sel), k)
