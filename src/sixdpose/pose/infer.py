@@ -278,6 +278,7 @@ class Estimator:
             "verify": self.verify, "colour_flips": self.colour_flips,
             "verify_config": ({k: getattr(self.reg_cfg, k) for k in _verify_fields()} if self.verify else None),
             "score_thresh": self.score_thresh, "seed": self.seed, "device": str(self.device),
+            "half_precision": bool(self.amp and self.device.type == "cuda"),
             "onboarding_s": round(self.onboarding_s, 3),
             "fallback": ({"method": self.fallback, "profile": self.fallback_profile,
                           "below": self.reg_cfg.verify_retry_below,
