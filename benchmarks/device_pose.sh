@@ -68,7 +68,8 @@ case "${1:-}" in
       --result-name "pose_${profile}_dense_local_ycbv_sample_$dev"
     if [ "$dev" = cuda ]; then
       # the dense head in half precision (autocast; its default on a GPU until session 31, now float32), and
-      # torch's CPU threads capped at 4 (the 16 by default made the frame slower there, session 31)
+      # torch's CPU threads capped at 4 (faster than the default 16 in one call of session 31, slower in the next:
+      # a probe of the machine's run-to-run spread, not a setting)
       bench --pose $p --data $d $sl --seg-profile cpu --device "$dev" --frames $frames --repeats $reps --steps 5 \
         --amp --result-name "pose_${profile}_dense_local_ycbv_sample_amp_$dev"
       bench --pose $p --data $d $sl --seg-profile cpu --device "$dev" --frames $frames --repeats $reps --steps 5 \

@@ -6,7 +6,9 @@ Usage::
                               [--device cpu|cuda]
                               [--instances 6] [--frames 10] [--repeats 1] [--steps 10] [--threads N]
                               [--json OUT]
-                              [--seg SEG_RUN | --seg-profile cpu|smoke|paper] [--data DIR[@SPLIT]]
+                              [--seg SEG_RUN | --seg-profile cpu|smoke|paper [--seg-backbone B]]
+                              [--seg-set FIELD=VALUE ...] [--data DIR[@SPLIT]] [--amp | --no-amp | --fp32]
+                              [--slides SLIDES.npz | --save-slides SLIDES.npz]
                               [--results-dir results] [--result-name pose_<profile>_<device>] [--no-result]
 
 * Training throughput (instances/s): optimiser steps of the main network and of the refiner
@@ -38,7 +40,14 @@ Usage::
   return as many detections as the frame has objects (score threshold 0, ``detections_per_img`` = the
   frame's instance count), so its cost is that of a trained network finding them; the pose stage then runs
   on the frame's ground-truth masks (an untrained network's masks are noise). The cost of Mask R-CNN does
-  not depend on its weights once the number of detections is fixed.
+  not depend on its weights once the number of detections is fixed. ``--seg-backbone`` replaces that
+  profile's backbone (``mobilenet_v3_large``: the ``cpu`` graph's real-time segmenter); ``--seg-set`` changes
+  the Mask R-CNN's inference fields (``amp=false``: float32 on a GPU).
+* ``--amp`` / ``--no-amp`` (``--fp32``): the pose networks in half or single precision on a GPU (default: the
+  estimator's, :attr:`Estimator.amp`: float32 for the dense head since session 31, half for the paper head).
+* A machine without Open3D (a lent GPU machine) cannot build the colour-named slides (model-side data made
+  with Open3D's voxel grid): ``--save-slides FILE`` writes those of ``--data``'s objects here and stops,
+  ``--slides FILE`` hands them to the estimator there (the same poses; ``benchmarks/device_pose.sh``).
 * Peak memory: CPU: the process' peak resident set size (MiB); CUDA: ``torch.cuda.max_memory_allocated``.
 
 The figures are also written as the result artifact ``results/pose_<profile>_<device>.json``

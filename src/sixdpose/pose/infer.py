@@ -262,7 +262,8 @@ class Estimator:
         if icp or colour_verify or verify or self.colour_flips:
             from ..registration import ReferenceCache, get_preset
 
-            # the learned stage's verification defaults (also the colour slides' step and elongation)
+            # verify_fields carries the learned stage's verification defaults (LEARNED_VERIFY, merged by each
+            # constructor), which also set the colour slides' step and elongation
             self.reg_cfg = get_preset("default", verify=verify, **(verify_fields or {}))
             self._symmetric = {int(c[0]) for c in self.classes if len(c) > 2 and c[2]}
             self._texture_off: dict[int, tuple] = {}  # id(cfg) -> (cfg, cfg without the texture search)
