@@ -62,6 +62,7 @@ import resource
 import sys
 import tempfile
 import time
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -73,6 +74,7 @@ from sixdpose.artifacts.results import add_result_arguments, save_from_args, scr
 from sixdpose.config import parse_overrides  # noqa: E402
 from sixdpose.datasets.base import Instance, Sample  # noqa: E402
 from sixdpose.errors import ConfigError  # noqa: E402
+from sixdpose.fileio import atomic_path  # noqa: E402
 from sixdpose.options import Int  # noqa: E402
 from sixdpose.pose import checkpoint as ck  # noqa: E402
 from sixdpose.pose.config import APPEARANCES, profile_config, refiner_profile_config  # noqa: E402
@@ -218,11 +220,30 @@ def train_throughput(profile: str, device, steps: int, inst_per_image: int = 6, 
 
 
 def load_slides(path: str | None) -> dict[int, np.ndarray]:
-    """The colour-named slides saved by ``--save-slides`` (obj_id -> (S, 4, 4)), or {} without a path."""
+    """The colour-named slides saved by ``--save-slides`` (obj_id -> (S, 4, 4)), or {} without a path.
+    Raises ValueError (one line naming the file) for a missing or unreadable file or a key not ``obj_<id>``."""
     if not path:
         return {}
-    with np.load(path) as z:
-        return {int(k.removeprefix("obj_")): z[k] for k in z.files}
+    try:
+        with np.load(path) as z:
+            return {int(k.removeprefix("obj_")): np.asarray(z[k], float).reshape(-1, 4, 4) for k in z.files}
+    except (OSError, ValueError, zipfile.BadZipFile) as e:
+        raise ValueError(f"{path}: not slides written by --save-slides ({str(e).splitlines()[0][:200]})") from None
+
+
+def save_slides(path: str, slides: dict[int, np.ndarray]) -> None:
+    """Write ``slides`` (obj_id -> (S, 4, 4)) to the .npz ``path`` atomically (:func:`load_slides` reads it)."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:  # a file object: np.savez adds no suffix
+        np.savez(f, **{f"obj_{o}": S for o, S in slides.items()})
+
+
+def set_up(est: Estimator, slides: dict | None, amp: bool | None) -> Estimator:
+    """``est`` with colour-named slides built elsewhere (:func:`load_slides`) and, unless None, its precision
+    on a GPU (:attr:`Estimator.amp`)."""
+    est.preload_slides(slides or {})
+    if amp is not None:
+        est.amp = amp
+    return est
 
 
 def inference_fps(pose, refiner, device, instances: int, frames: int, data: str | None = None,
@@ -234,8 +255,7 @@ def inference_fps(pose, refiner, device, instances: int, frames: int, data: str 
     colour-named slides built elsewhere (:func:`load_slides`), for a machine without Open3D. ``amp``: half
     precision on a GPU (:attr:`Estimator.amp`; None: the estimator's default)."""
     if data is None:
-        est = Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device))
-        est.amp = est.amp if amp is None else amp
+        est = set_up(Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device)), None, amp)
         samples = [synthetic_frame(instances)] * (frames + 1)
     else:
         from sixdpose.datasets import as_reader
@@ -243,9 +263,8 @@ def inference_fps(pose, refiner, device, instances: int, frames: int, data: str 
         path, _, split = data.partition("@")
         reader = as_reader(path, split=split or "test")
         samples = [reader.load(k) for k in reader.keys()[: frames + 1]]
-        est = Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device), reader=reader)
-        est.preload_slides(slides or {})
-        est.amp = est.amp if amp is None else amp
+        est = set_up(Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device), reader=reader),
+                     slides, amp)
     for s in samples if data is not None else samples[:1]:  # warm-up: first-call allocations, and with
         est.predict(s)  # --data each object's onboarding (model reads, model-side data), not timed
     times, means = median_pass(lambda s: est.predict(s), samples[1:], device, repeats)
@@ -289,10 +308,9 @@ def end_to_end_fps(seg, pose, refiner, data, device, frames: int, untrained: boo
     path, _, split = data.partition("@")
     reader = as_reader(path, split=split or "test")
     samples = [reader.load(k, masks=untrained) for k in reader.keys()[: frames + 1]]  # disk reads not timed
-    est = Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device),
-                    reader=reader)  # scores >= 0.5, as predict-pose; the reader for flips named by colour
-    est.preload_slides(slides or {})
-    est.amp = est.amp if amp is None else amp
+    # scores >= 0.5, as predict-pose; the reader for flips named by colour
+    est = set_up(Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device), reader=reader),
+                 slides, amp)
     if untrained:  # one network per detection count, each returning exactly that many
         segms = {n: Segmenter(seg, device=str(device), score_thresh=0.0,
                               overrides={**(seg_overrides or {}), "detections_per_img": n},
@@ -400,13 +418,18 @@ def main(argv=None) -> int:
 
         path, _, split = a.data.partition("@")
         reader = as_reader(path, split=split or "test")
-        objs = sorted({g.obj_id for k in reader.keys()[: a.frames + 1] for g in reader.load(k, masks=False).instances})
+        objs = sorted({g.obj_id for k in reader.keys()[: a.frames + 1]
+                       for g in reader.load(k, masks=False, rgb=False, depth=False).instances})
         est = Estimator(a.pose, None, iterations=0, device="cpu", reader=reader)
         slides = est.export_slides(o for o in objs if o in est.class_index)
-        np.savez(a.save_slides, **{f"obj_{o}": S for o, S in slides.items()})
+        save_slides(a.save_slides, slides)
         print(f"slides of objects {sorted(slides)} ({sum(len(S) for S in slides.values())} in all) -> {a.save_slides}")
         return 0
-    slides = load_slides(a.slides)
+    try:
+        slides = load_slides(a.slides)
+    except ValueError as e:
+        print(f"--slides: {e}", file=sys.stderr)
+        return 2
     from sixdpose.segmentation.infer import check_inference_overrides
 
     try:

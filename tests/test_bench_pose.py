@@ -71,8 +71,8 @@ def test_slides_saved_where_open3d_is_are_used_instead_of_building_them(tmp_path
     """--save-slides writes each object's colour-named slides (built from the model with Open3D) and stops;
     --slides hands them to the estimator, which then never builds them (a lent GPU machine has no Open3D),
     here with an untrained MobileNetV3 Mask R-CNN (--seg-backbone) in float32 (--seg-set amp=false) and the pose
-    networks in float32 (--fp32); --seg-backbone without --seg-profile, or a --seg-set field that cannot change
-    at inference, is refused with exit status 2."""
+    networks in float32 (--fp32); a --slides file that is not one, --seg-backbone without --seg-profile, or a
+    --seg-set field that cannot change at inference, is refused with exit status 2."""
     bench = _bench()
     data = write_synthetic_dataset(tmp_path / "d", n_images=3)
     # shape flips named by colour (appearance local, flip_choice auto): the estimator scores the slides
@@ -95,6 +95,9 @@ def test_slides_saved_where_open3d_is_are_used_instead_of_building_them(tmp_path
                    "--fp32", "--seg-set", "amp=false", "--steps", "1", "--json", str(out)]
     assert bench.main(args) == 0
     assert json.loads(out.read_text())["e2e_frames"] == 2
+    (tmp_path / "bad.npz").write_text("not an npz")
+    assert bench.main(base + ["--slides", str(tmp_path / "bad.npz")]) == 2
+    assert "bad.npz: not slides written by --save-slides" in capsys.readouterr().err
     assert bench.main(base + ["--seg-backbone", "mobilenet_v3_large"]) == 2
     assert "--seg-backbone needs --seg-profile" in capsys.readouterr().err
     assert bench.main(base + ["--seg-profile", "smoke", "--seg-set", "backbone=resnet50"]) == 2
