@@ -72,6 +72,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
 from sixdpose.artifacts.results import add_result_arguments, save_from_args, script_command  # noqa: E402
 from sixdpose.config import parse_overrides  # noqa: E402
+from sixdpose.constants import SEG_BACKBONES  # noqa: E402
 from sixdpose.datasets.base import Instance, Sample  # noqa: E402
 from sixdpose.errors import ConfigError  # noqa: E402
 from sixdpose.fileio import atomic_path  # noqa: E402
@@ -371,7 +372,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seg-profile", default=None, choices=("smoke", "cpu", "paper"),
                     help="time end to end with an untrained Mask R-CNN of this segmentation profile instead of "
                          "--seg (detections fixed to the frame's objects, pose on GT masks)")
-    ap.add_argument("--seg-backbone", default=None,
+    ap.add_argument("--seg-backbone", default=None, choices=sorted(SEG_BACKBONES),
                     help="with --seg-profile: that profile's Mask R-CNN with this backbone instead (e.g. "
                          "mobilenet_v3_large, the cpu graph's real-time segmenter)")
     ap.add_argument("--seg-set", action="append", default=[], metavar="FIELD=VALUE",

@@ -98,6 +98,9 @@ def test_slides_saved_where_open3d_is_are_used_instead_of_building_them(tmp_path
     (tmp_path / "bad.npz").write_text("not an npz")
     assert bench.main(base + ["--slides", str(tmp_path / "bad.npz")]) == 2
     assert "bad.npz: not slides written by --save-slides" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:  # argparse: an unknown backbone, one line naming the option
+        bench.main(base + ["--seg-profile", "smoke", "--seg-backbone", "vgg"])
+    assert e.value.code == 2 and "--seg-backbone" in capsys.readouterr().err
     assert bench.main(base + ["--seg-backbone", "mobilenet_v3_large"]) == 2
     assert "--seg-backbone needs --seg-profile" in capsys.readouterr().err
     assert bench.main(base + ["--seg-profile", "smoke", "--seg-set", "backbone=resnet50"]) == 2
