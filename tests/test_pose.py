@@ -16,7 +16,7 @@ from sixdpose.pose import checkpoint as ck  # noqa: E402
 from sixdpose.pose.config import PoseConfig, RefinerConfig, profile_config  # noqa: E402
 from sixdpose.pose.geometry import compose_refinement, quaternion_to_matrix, sixd_to_matrix, to_object_frame  # noqa: E402
 from sixdpose.pose.loss import pose_loss  # noqa: E402
-from sixdpose.pose.model import PoseNet, PSPNet, Refiner, build_posenet  # noqa: E402
+from sixdpose.pose.model import OFFSET_SCALE, PoseNet, PSPNet, Refiner, build_posenet  # noqa: E402
 from sixdpose.runs import save_checkpoint  # noqa: E402
 from test_reg_helpers import H_SMALL, K_SMALL, W_SMALL, make_shape, render_depth  # noqa: E402
 
@@ -79,6 +79,26 @@ def fake_pose_run(path: Path, cfg: PoseConfig, classes=((OID, "035_power_drill",
 
 
 # ---------------------------------------------------------------- blocks
+def test_heads_computed_without_repeating_the_global_feature_are_the_concatenated_ones():
+    """PoseNet._head (the global feature's product once per instance) and the dense head's per-class output
+    rows give what the DenseFusion formulation (the global feature repeated at every point, every class's
+    outputs) gives."""
+    torch.manual_seed(0)
+    for head in ("paper", "dense"):
+        net = PoseNet(4, width=0.25, norm="group", head=head, flips=3 if head == "dense" else 0).eval()
+        cloud, emb, obj = torch.randn(3, 30, 3), torch.randn(3, 32, 30), torch.tensor([2, 0, 2])
+        with torch.no_grad():
+            seq = net.head_d if head == "dense" else net.head_t
+            split, full = net._head(seq, *net._fused(cloud, emb)), seq(net.fuse(cloud, emb))
+            assert torch.allclose(split, full, atol=1e-5) and full.abs().max() > 0.1
+            if head == "dense":
+                out = net._dense(cloud, emb, obj)
+                every = net.out_d(full).view(3, 4, 7, 30)[torch.arange(3), obj]
+                assert torch.allclose(out["conf_logit"], every[:, 3], atol=1e-5)
+                coords = net.centres[obj][:, None, :] + OFFSET_SCALE * every[:, :3].transpose(1, 2)
+                assert torch.allclose(out["coords"], coords, atol=1e-5)
+
+
 def test_block_shapes_and_1408_fusion():
     x = torch.randn(2, 3, 64, 48)
     assert PSPNet(width=1 / 16, emb_dim=32)(x).shape == (2, 32, 64, 48)

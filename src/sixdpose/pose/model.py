@@ -364,12 +364,28 @@ class PoseNet(nn.Module):
 
     def fuse(self, cloud: torch.Tensor, emb: torch.Tensor) -> torch.Tensor:
         """Dense fusion: cloud (N, P, 3) and embedding (N, E, P) -> (N, 1408*w, P) per-point features."""
+        pf, g = self._fused(cloud, emb)
+        return torch.cat([pf, g[:, :, None].expand(-1, -1, pf.shape[2])], 1)
+
+    def _fused(self, cloud: torch.Tensor, emb: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`fuse`'s two parts: the per-point features (N, 384*w, P) and the global feature (N, 1024*w),
+        which :meth:`fuse` repeats at every point."""
         x = cloud.transpose(1, 2)
         x1, e1 = self.conv1(x), self.e_conv1(emb)
         x2, e2 = self.conv2(x1), self.e_conv2(e1)
-        pf1, pf2 = torch.cat([x1, e1], 1), torch.cat([x2, e2], 1)
-        g = self.conv6(self.conv5(pf2)).mean(dim=2, keepdim=True)
-        return torch.cat([pf1, pf2, g.expand(-1, -1, x.shape[2])], 1)
+        pf2 = torch.cat([x2, e2], 1)
+        g = self.conv6(self.conv5(pf2)).mean(dim=2)
+        return torch.cat([x1, e1, pf2], 1), g
+
+    @staticmethod
+    def _head(head: nn.Sequential, pf: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
+        """``head(fuse(...))`` from :meth:`_fused`'s parts without repeating the global feature: the first 1x1
+        convolution's product with ``g`` is the same at every point, so it is computed once per instance and
+        added (the same function; a third of the head's multiplications saved)."""
+        conv = head[0][0]
+        cp = pf.shape[1]
+        y = F.conv1d(pf, conv.weight[:, :cp]) + F.linear(g, conv.weight[:, cp:, 0], conv.bias)[:, :, None]
+        return head[1:](head[0][1:](y))
 
     def forward(self, images, img_index, choose, cloud, obj_index):
         """Predict poses.
@@ -405,9 +421,9 @@ class PoseNet(nn.Module):
         # centroid_offset: the centred cloud in units of OFFSET_SCALE (spread ~1, not ~0.05 m, so the
         # geometry features are not swamped by the biases) and the offset predicted in the same units
         inp = (cloud - centroid[:, None, :]) / OFFSET_SCALE if self.translation == "centroid_offset" else cloud
-        f = self.fuse(inp, emb)
-        hr, wr = self.att_r(self.head_r(f))
-        ht, wt = self.att_t(self.head_t(f))
+        pf, g = self._fused(inp, emb)
+        hr, wr = self.att_r(self._head(self.head_r, pf, g))
+        ht, wt = self.att_t(self._head(self.head_t, pf, g))
         n = len(obj_index)
         rd = rotation_dim(self.rotation)
         r = self.out_r(hr).view(n, self.num_classes, rd)[torch.arange(n), obj_index]
@@ -422,9 +438,11 @@ class PoseNet(nn.Module):
     def _dense(self, centred, emb, obj_index):
         """The dense head: the centred cloud (N, P, 3) in units of OFFSET_SCALE (in the input frame), per-point
         object coordinates as offsets (same units) from the class's model-box centre, and a confidence logit."""
-        f = self.fuse(centred, emb)
-        n, p = len(obj_index), centred.shape[1]
-        o = self.out_d(self.head_d(f)).view(n, self.num_classes, 4 + self.flips, p)[torch.arange(n), obj_index]
+        h = self._head(self.head_d, *self._fused(centred, emb))  # (N, 128*w, P)
+        # out_d for each instance's own class only (its rows of the weight): the other classes' outputs unused
+        k = 4 + self.flips
+        o = torch.baddbmm(self.out_d.bias.view(self.num_classes, k)[obj_index][:, :, None],
+                          self.out_d.weight.view(self.num_classes, k, -1)[obj_index], h)  # (N, 4 + F, P)
         coords = self.centres[obj_index].to(o.dtype)[:, None, :] + OFFSET_SCALE * o[:, :3].transpose(1, 2)
         out = {"coords": coords, "conf_logit": o[:, 3], "emb": emb}
         if self.flips:
