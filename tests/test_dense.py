@@ -635,6 +635,55 @@ def test_colour_scores_rank_the_true_turn_of_a_coloured_box_first():
         assert np.isneginf(colour_scores(cands, seen + 5.0, cols, grid, model.diameter)).all()
 
 
+def test_colour_scores_of_every_candidate_in_one_pass_equal_the_kernel_per_candidate():
+    """colour_scores' one compiled pass over the candidates (_poses_kernel) gives, for each candidate, what the
+    search's kernel (_score_kernel) gives on that candidate's points within the grid's radius, combined as
+    col + cv_geo_weight * geo * (share of the points kept); -inf where fewer than 4 are kept."""
+    from sixdpose.geometry import X_from
+    from sixdpose.registration.presets import PRESETS
+    from sixdpose.registration.verify import SMOOTH_K, _score_kernel, build_grid, chroma, colour_scores
+
+    cfg = PRESETS["default"]
+    model = _box_model()
+    colors = _quadrant_colours(model.points - model.points.mean(axis=0))
+    grid = build_grid(model.points, colors, model.diameter)
+    rng = np.random.default_rng(3)
+    R, t = Rotation.from_rotvec(rng.normal(size=3) * 0.3).as_matrix(), np.array([0.01, 0.02, 0.6])
+    near = (model.points @ R.T + t)[:, 2] < np.percentile((model.points @ R.T + t)[:, 2], 40)
+    seen, cols = (model.points @ R.T + t)[near], colors[near] * rng.uniform(0.8, 1.0, (near.sum(), 1))
+    cands = np.stack([X_from(Rotation.from_rotvec(rng.normal(size=3) * a).as_matrix() @ R,
+                             t + rng.normal(size=3) * s) for a, s in [(0, 0), (0.3, 0.005), (2.0, 0.02), (0, 5.0)]])
+    cands = np.concatenate([cands[:3], [X_from(R, t + [0.9 * grid.radius, 0, 0])], cands[3:]])  # part outside
+    got = colour_scores(cands, seen, cols, grid, model.diameter, cfg)
+    # the reference: the same pooled points and smoothed colours, then the kernel candidate by candidate
+    P = np.asarray(seen, float)
+    pool = np.random.default_rng(cfg.seed).choice(len(P), size=min(len(P), 2000), replace=False)
+    sel = pool[: min(len(pool), cfg.cv_points)]
+    k = min(SMOOTH_K, len(pool))
+    from scipy.spatial import cKDTree
+
+    dist, nb = cKDTree(P[pool]).query(P[sel], k=k, distance_upper_bound=cfg.cv_smooth_rel * model.diameter)
+    ok = np.isfinite(dist)
+    ch = chroma(cols[pool])
+    fs = (ch[np.where(ok, nb, 0)] * ok[..., None]).sum(axis=1) / ok.sum(axis=1, keepdims=True)
+    fs -= fs.mean(axis=0)
+    geo, col = np.empty(1), np.empty(1)
+    kept = []
+    for X, g in zip(cands, got, strict=True):
+        v = (P[sel] - X[:3, 3]) @ X[:3, :3] - grid.centroid
+        inside = np.linalg.norm(v, axis=1) < grid.radius
+        kept.append(inside.mean())
+        if inside.sum() < 4:
+            assert np.isneginf(g)
+            continue
+        _score_kernel(v[inside].astype(np.float32), np.eye(3, dtype=np.float32)[None],
+                      grid.centroid.astype(np.float32), grid.origin.astype(np.float32), np.float32(1.0 / grid.cell),
+                      int(grid.shape[1]), int(grid.shape[2]), grid.weights(cfg.cv_coarse_sigma_rel * model.diameter),
+                      grid.smooth, fs[inside].astype(np.float32), geo, col)
+        assert abs(g - (col[0] + cfg.cv_geo_weight * geo[0] * inside.mean())) < 1e-4
+    assert np.isfinite(got[:4]).all() and np.isneginf(got[4]) and got[0] > got[2] and 0.1 < kept[3] < 0.9
+
+
 def test_geometry_only_network_has_no_cnn_and_config_checks():
     from sixdpose.errors import ConfigError
     from sixdpose.pose.config import PoseConfig

@@ -215,6 +215,34 @@ def test_batched_inference_equals_per_instance(pose_ds, crop):
         assert np.allclose(Rb[k], R1[0], atol=1e-5) and np.allclose(tb[k], t1[0], atol=1e-6)
 
 
+@pytest.mark.parametrize("appearance", ["local", "none"])
+def test_a_network_that_reads_no_image_is_given_no_crops(pose_ds, appearance):
+    """A network whose appearance reads no image (local geometry, or none) gives the same outputs without the
+    instances' crops (extract_instance(image=False), collate_frames' empty images) as with them, from the same
+    points; a CNN's and a colour-reading local network do read them."""
+    from sixdpose.datasets import as_reader
+    from sixdpose.pose.data import Frame, collate_frames, extract_instance
+
+    assert PoseNet(2, width=1 / 16, appearance="cnn").reads_images
+    assert PoseNet(2, width=1 / 16, head="dense", appearance="local_rgb").reads_images
+    torch.manual_seed(0)
+    net = PoseNet(1, width=1 / 16, head="dense", flips=2, appearance=appearance, input_frame="pca").eval()
+    assert not net.reads_images
+    s = as_reader(pose_ds).load((0, 0))
+    outs = []
+    for image in (True, False):
+        rng = np.random.default_rng(0)
+        insts = [extract_instance(s.rgb, s.depth, s.K, g.mask, g.obj_id, crop=32, margin=0.1, num_points=64,
+                                  min_points=10, rng=rng, index=k, image=image) for k, g in enumerate(s.instances)]
+        b = collate_frames([Frame(None, insts)], {OID: 0})
+        assert (b["images"].shape[0] == 0) == (not image) and (insts[0].image is None) == (not image)
+        with torch.no_grad():
+            outs.append((b["cloud"], net(b["images"], b["img_index"], b["choose"], b["cloud"], b["obj_index"])))
+    (c1, o1), (c2, o2) = outs
+    assert torch.equal(c1, c2)
+    assert torch.equal(o1["coords"], o2["coords"]) and torch.equal(o1["conf_logit"], o2["conf_logit"])
+
+
 def test_depth_band_drops_background_seen_through_a_loose_mask():
     """A predicted mask spilling onto the background: the depth band (the object's diameter) keeps the
     object's points only, so the cloud's centroid stays on the object; 0 keeps everything."""

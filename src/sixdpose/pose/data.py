@@ -96,7 +96,7 @@ def crop_image(rgb: np.ndarray, y0: float, x0: float, side: float, size: int) ->
 def extract_instance(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, mask: np.ndarray, obj_id: int, *,
                      crop: int, margin: float, num_points: int, min_points: int, rng: np.random.Generator,
                      index: int = 0, score: float = 1.0, keep_points: bool = False,
-                     depth_band: float = 0.0, crop_jitter: float = 0.0) -> InstanceInput | str:
+                     depth_band: float = 0.0, crop_jitter: float = 0.0, image: bool = True) -> InstanceInput | str:
     """Build the input of one instance, or return the reason it is unusable.
 
     Args:
@@ -112,6 +112,8 @@ def extract_instance(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, mask: np
             and so the translation tens of centimetres back; it assumes most masked pixels lie on the
             object, as the median is taken over all of them). 0 keeps every point.
         crop_jitter: training augmentation of the crop window (:func:`crop_window`); 0 at inference.
+        image: False for a network that reads no image (:attr:`~.model.PoseNet.reads_images`): no crop is
+            cut (the instance's ``image`` is None, ``choose`` indexes the full image); the points are the same.
     Returns:
         :class:`InstanceInput` or a reason string such as ``"3 valid depth pixels under the mask (< 10)"``.
     """
@@ -126,7 +128,7 @@ def extract_instance(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, mask: np
         return f"{n} valid depth pixel(s) under the mask (< {min_points})"
     sel = rng.permutation(n)[:num_points] if n > num_points else np.resize(rng.permutation(n), num_points)
     v, u = pix[sel, 0], pix[sel, 1]
-    if crop:
+    if crop and image:
         y0, x0, side = crop_window(mask, margin, crop_jitter, rng)
         image = crop_image(rgb, y0, x0, side, crop)
         i = np.clip(np.floor((v + 0.5 - y0) * crop / side), 0, crop - 1).astype(np.int64)
@@ -166,7 +168,9 @@ def collate_frames(frames: list[Frame], class_index: dict[int, int], noise: floa
     """Batch the instances of several frames for one forward pass.
 
     Crop mode: one image per instance. Full-image mode: one image per frame (its instances share the
-    CNN pass). ``noise``, ``jitter``: training augmentation (:func:`normalise_images`). Returns a dict
+    CNN pass). Neither (instances without crops and frames without images, for a network that reads no
+    image): ``images`` is an empty (0, 3, 1, 1) tensor. ``noise``, ``jitter``: training augmentation
+    (:func:`normalise_images`). Returns a dict
     of CPU tensors: ``images`` (B, 3, H, W), ``img_index`` (N,), ``choose`` (N, P), ``cloud`` (N, P, 3),
     ``obj_index`` (N,), and ``R`` (N, 3, 3) / ``t`` (N, 3) float32 when every instance has ground truth;
     ``instances``: the :class:`InstanceInput` list.
@@ -174,15 +178,17 @@ def collate_frames(frames: list[Frame], class_index: dict[int, int], noise: floa
     insts = [i for f in frames for i in f.instances]
     if not insts:
         return {"instances": []}
+    keep = [f for f in frames if f.instances]
     if insts[0].image is not None:
         imgs = np.stack([i.image for i in insts])
         img_index = np.arange(len(insts))
+    elif all(f.image is None for f in keep):  # a network that reads no image: nothing to normalise
+        imgs, img_index = None, np.zeros(len(insts), np.int64)
     else:
-        keep = [f for f in frames if f.instances]
         imgs = np.stack([f.image[..., :3] for f in keep])
         img_index = np.concatenate([np.full(len(f.instances), k) for k, f in enumerate(keep)])
     out = {
-        "images": normalise_images(imgs, noise, rng, jitter),
+        "images": normalise_images(imgs, noise, rng, jitter) if imgs is not None else torch.zeros(0, 3, 1, 1),
         "img_index": torch.from_numpy(img_index.astype(np.int64)),
         "choose": torch.from_numpy(np.stack([i.choose for i in insts])),
         "cloud": torch.from_numpy(np.stack([i.cloud for i in insts])),

@@ -360,7 +360,8 @@ class Estimator:
             inst = extract_instance(sample.rgb, sample.depth, sample.K, mask, oid, crop=self.cfg.crop,
                                     margin=self.cfg.crop_margin,
                                     num_points=self.cfg.num_points, min_points=self.cfg.min_points, rng=rng, index=k,
-                                    score=score, keep_points=keep_points, depth_band=self._diameter(oid))
+                                    score=score, keep_points=keep_points, depth_band=self._diameter(oid),
+                                    image=self.net.reads_images)  # no crop cut for a network that reads none
             if isinstance(inst, str):
                 rows[k] = PoseEstimate.failed(sample.scene_id, sample.im_id, oid, inst)
             else:
@@ -368,7 +369,8 @@ class Estimator:
         step = self.max_batch if self.cfg.crop else max(len(usable), 1)
         for s in range(0, len(usable), step):
             chunk = usable[s:s + step]
-            batch = collate_frames([Frame(None if self.cfg.crop else sample.rgb, chunk)], self.class_index)
+            batch = collate_frames([Frame(None if self.cfg.crop or not self.net.reads_images else sample.rgb, chunk)],
+                                   self.class_index)
             if self.dense:
                 R, t, icp_done = self._dense_poses(batch, chunk, np.random.default_rng(
                     [self.seed, int(sample.scene_id), int(sample.im_id), 1]))

@@ -348,6 +348,12 @@ class PoseNet(nn.Module):
             self.flip_t[k, : len(R)] = t
             self.flip_n[k] = len(R)
 
+    @property
+    def reads_images(self) -> bool:
+        """Whether :meth:`forward` reads its ``images`` (a CNN, or local geometry with the points' colours);
+        ``appearance`` "local" and "none" read the points alone."""
+        return self.cnn is not None or (self.local is not None and self.local.colour)
+
     def embed(self, images: torch.Tensor, img_index: torch.Tensor, choose: torch.Tensor) -> torch.Tensor:
         """Per-point colour embeddings: one CNN pass over ``images``, gathered at the sampled pixels.
 

@@ -210,13 +210,72 @@ def _score_kernel(v, S, c, origin, inv_cell, ny, nz, weights, feat, fs, out_geo,
         out_col[m] = num / (math.sqrt(fs2 * max(var, 0.0)) + 1e-12)
 
 
+@numba.njit(cache=True, fastmath=True, nogil=True)
+def _poses_kernel(P, R, t, gc, radius, origin, inv_cell, ny, nz, weights, feat, fs, geo_weight,
+                  out):  # pragma: no cover - njit
+    """:func:`_score_kernel`'s two terms for each candidate pose ``(R[m], t[m])`` (object in camera) of the
+    scene points ``P`` (K, 3, camera frame) at once: the points are taken to the object frame, those within
+    ``radius`` of the grid's centroid ``gc`` kept (the sums of the centred scene features ``fs`` (K, 3) over
+    them too), and ``out[m] = col + geo_weight * geo * kept / K`` (``-inf`` with fewer than 4 kept), as
+    :func:`colour_scores` combines them. One pass per candidate, no temporaries."""
+    K = P.shape[0]
+    r2 = radius * radius
+    for m in range(R.shape[0]):
+        n = 0
+        sfs0 = 0.0
+        sfs1 = 0.0
+        sfs2 = 0.0
+        fs2 = 0.0
+        sw = 0.0
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        sq = 0.0
+        dot = 0.0
+        for k in range(K):
+            d0 = P[k, 0] - t[m, 0]
+            d1 = P[k, 1] - t[m, 1]
+            d2 = P[k, 2] - t[m, 2]
+            x = d0 * R[m, 0, 0] + d1 * R[m, 1, 0] + d2 * R[m, 2, 0]
+            y = d0 * R[m, 0, 1] + d1 * R[m, 1, 1] + d2 * R[m, 2, 1]
+            z = d0 * R[m, 0, 2] + d1 * R[m, 1, 2] + d2 * R[m, 2, 2]
+            if (x - gc[0]) ** 2 + (y - gc[1]) ** 2 + (z - gc[2]) ** 2 >= r2:
+                continue
+            n += 1
+            sfs0 += fs[k, 0]
+            sfs1 += fs[k, 1]
+            sfs2 += fs[k, 2]
+            fs2 += fs[k, 0] * fs[k, 0] + fs[k, 1] * fs[k, 1] + fs[k, 2] * fs[k, 2]
+            idx = (int((x - origin[0]) * inv_cell) * ny + int((y - origin[1]) * inv_cell)) * nz \
+                + int((z - origin[2]) * inv_cell)
+            sw += weights[idx]
+            f0 = feat[idx, 0]
+            f1 = feat[idx, 1]
+            f2 = feat[idx, 2]
+            s0 += f0
+            s1 += f1
+            s2 += f2
+            sq += f0 * f0 + f1 * f1 + f2 * f2
+            dot += fs[k, 0] * f0 + fs[k, 1] * f1 + fs[k, 2] * f2
+        if n < 4:
+            out[m] = -np.inf
+            continue
+        num = dot - (s0 * sfs0 + s1 * sfs1 + s2 * sfs2) / n
+        var = sq - (s0 * s0 + s1 * s1 + s2 * s2) / n
+        col = num / (math.sqrt(fs2 * max(var, 0.0)) + 1e-12)
+        out[m] = col + geo_weight * (sw / n) * (n / K)
+
+
 def warmup() -> None:
-    """Compile :func:`_score_kernel` (or load it from Numba's on-disk cache) on a tiny input, so the
-    first instance's time is not charged with it (a process start-up cost, like the imports)."""
+    """Compile :func:`_score_kernel` and :func:`_poses_kernel` (or load them from Numba's on-disk cache) on a
+    tiny input, so the first instance's time is not charged with it (a process start-up cost, like the
+    imports)."""
     g = np.zeros(8, np.float32)
     _score_kernel(np.zeros((1, 3), np.float32), np.eye(3, dtype=np.float32)[None], np.zeros(3, np.float32),
                   np.zeros(3, np.float32), np.float32(1.0), 2, 2, g, np.zeros((8, 3), np.float32),
                   np.zeros((1, 3), np.float32), np.empty(1), np.empty(1))
+    _poses_kernel(np.zeros((1, 3)), np.eye(3)[None], np.zeros((1, 3)), np.zeros(3), 1.0, np.zeros(3), 1.0, 2, 2, g,
+                  np.zeros((8, 3), np.float32), np.zeros((1, 3)), 0.5, np.empty(1))
 
 
 def _corr(fs: np.ndarray, fm: np.ndarray) -> np.ndarray:
@@ -274,18 +333,12 @@ def colour_scores(
     ok = np.isfinite(dist)  # the point itself is always among them
     fs = (ch[np.where(ok, nb, 0)] * ok[..., None]).sum(axis=1) / ok.sum(axis=1, keepdims=True)
     fs -= fs.mean(axis=0)
-    c32 = grid.centroid.astype(np.float32)
-    weights = grid.weights(cfg.cv_coarse_sigma_rel * diameter)
-    geo, col = np.empty(1), np.empty(1)
-    for k, Xk in enumerate(X):
-        v = (P[sel] - Xk[:3, 3]) @ Xk[:3, :3] - grid.centroid
-        inside = np.linalg.norm(v, axis=1) < grid.radius
-        if inside.sum() < 4:
-            continue
-        _score_kernel(v[inside].astype(np.float32), np.eye(3, dtype=np.float32)[None], c32,
-                      grid.origin.astype(np.float32), np.float32(1.0 / grid.cell), int(grid.shape[1]),
-                      int(grid.shape[2]), weights, grid.smooth, fs[inside].astype(np.float32), geo, col)
-        out[k] = col[0] + cfg.cv_geo_weight * geo[0] * inside.mean()
+    # every candidate in one compiled pass (the points within the grid's radius of its centroid, per candidate)
+    _poses_kernel(P[sel], np.ascontiguousarray(X[:, :3, :3]), np.ascontiguousarray(X[:, :3, 3]),
+                  np.asarray(grid.centroid, np.float64), float(grid.radius), np.asarray(grid.origin, np.float64),
+                  float(1.0 / grid.cell), int(grid.shape[1]), int(grid.shape[2]),
+                  grid.weights(cfg.cv_coarse_sigma_rel * diameter), np.asarray(grid.smooth, np.float32),
+                  np.asarray(fs, np.float64), float(cfg.cv_geo_weight), out)
     return out
 
 
