@@ -218,7 +218,7 @@ def test_batched_inference_equals_per_instance(pose_ds, crop):
 @pytest.mark.parametrize("appearance", ["local", "none"])
 def test_a_network_that_reads_no_image_is_given_no_crops(pose_ds, appearance):
     """A network whose appearance reads no image (local geometry, or none) gives the same outputs without the
-    instances' crops (extract_instance(image=False), collate_frames' empty images) as with them, from the same
+    instances' crops (extract_instance(with_image=False), collate_frames' empty images) as with them, from the same
     points; a CNN's and a colour-reading local network do read them."""
     from sixdpose.datasets import as_reader
     from sixdpose.pose.data import Frame, collate_frames, extract_instance
@@ -233,7 +233,8 @@ def test_a_network_that_reads_no_image_is_given_no_crops(pose_ds, appearance):
     for image in (True, False):
         rng = np.random.default_rng(0)
         insts = [extract_instance(s.rgb, s.depth, s.K, g.mask, g.obj_id, crop=32, margin=0.1, num_points=64,
-                                  min_points=10, rng=rng, index=k, image=image) for k, g in enumerate(s.instances)]
+                                  min_points=10, rng=rng, index=k, with_image=image)
+                 for k, g in enumerate(s.instances)]
         b = collate_frames([Frame(None, insts)], {OID: 0})
         assert (b["images"].shape[0] == 0) == (not image) and (insts[0].image is None) == (not image)
         with torch.no_grad():

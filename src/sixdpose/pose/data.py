@@ -96,7 +96,8 @@ def crop_image(rgb: np.ndarray, y0: float, x0: float, side: float, size: int) ->
 def extract_instance(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, mask: np.ndarray, obj_id: int, *,
                      crop: int, margin: float, num_points: int, min_points: int, rng: np.random.Generator,
                      index: int = 0, score: float = 1.0, keep_points: bool = False,
-                     depth_band: float = 0.0, crop_jitter: float = 0.0, image: bool = True) -> InstanceInput | str:
+                     depth_band: float = 0.0, crop_jitter: float = 0.0,
+                     with_image: bool = True) -> InstanceInput | str:
     """Build the input of one instance, or return the reason it is unusable.
 
     Args:
@@ -112,7 +113,7 @@ def extract_instance(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, mask: np
             and so the translation tens of centimetres back; it assumes most masked pixels lie on the
             object, as the median is taken over all of them). 0 keeps every point.
         crop_jitter: training augmentation of the crop window (:func:`crop_window`); 0 at inference.
-        image: False for a network that reads no image (:attr:`~.model.PoseNet.reads_images`): no crop is
+        with_image: False for a network that reads no image (:attr:`~.model.PoseNet.reads_images`): no crop is
             cut (the instance's ``image`` is None, ``choose`` indexes the full image); the points are the same.
     Returns:
         :class:`InstanceInput` or a reason string such as ``"3 valid depth pixels under the mask (< 10)"``.
@@ -128,7 +129,7 @@ def extract_instance(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, mask: np
         return f"{n} valid depth pixel(s) under the mask (< {min_points})"
     sel = rng.permutation(n)[:num_points] if n > num_points else np.resize(rng.permutation(n), num_points)
     v, u = pix[sel, 0], pix[sel, 1]
-    if crop and image:
+    if crop and with_image:
         y0, x0, side = crop_window(mask, margin, crop_jitter, rng)
         image = crop_image(rgb, y0, x0, side, crop)
         i = np.clip(np.floor((v + 0.5 - y0) * crop / side), 0, crop - 1).astype(np.int64)

@@ -361,7 +361,7 @@ class Estimator:
                                     margin=self.cfg.crop_margin,
                                     num_points=self.cfg.num_points, min_points=self.cfg.min_points, rng=rng, index=k,
                                     score=score, keep_points=keep_points, depth_band=self._diameter(oid),
-                                    image=self.net.reads_images)  # no crop cut for a network that reads none
+                                    with_image=self.net.reads_images)  # no crop cut for a network that reads none
             if isinstance(inst, str):
                 rows[k] = PoseEstimate.failed(sample.scene_id, sample.im_id, oid, inst)
             else:

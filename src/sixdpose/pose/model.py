@@ -388,10 +388,11 @@ class PoseNet(nn.Module):
         """``head(fuse(...))`` from :meth:`_fused`'s parts without repeating the global feature: the first 1x1
         convolution's product with ``g`` is the same at every point, so it is computed once per instance and
         added (the same function; a third of the head's multiplications saved)."""
-        conv = head[0][0]
-        cp = pf.shape[1]
-        y = F.conv1d(pf, conv.weight[:, :cp]) + F.linear(g, conv.weight[:, cp:, 0], conv.bias)[:, :, None]
-        return head[1:](head[0][1:](y))
+        first = head[0]  # _conv1d: Conv1d, norm, ReLU
+        assert isinstance(first, nn.Sequential) and isinstance(first[0], nn.Conv1d)
+        w, cp = first[0].weight, pf.shape[1]
+        y = F.conv1d(pf, w[:, :cp]) + F.linear(g, w[:, cp:, 0], first[0].bias)[:, :, None]
+        return head[1:](first[1:](y))
 
     def forward(self, images, img_index, choose, cloud, obj_index):
         """Predict poses.
