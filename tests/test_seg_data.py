@@ -290,6 +290,28 @@ def test_compiled_backbone_gives_the_eager_detections_at_other_sizes(backbone):
         assert torch.equal(u["labels"], v["labels"]) and torch.allclose(u["boxes"], v["boxes"], atol=1e-2)
 
 
+def test_inference_transform_normalises_after_resizing_with_the_same_network_input():
+    """The Segmenter's transform (_ResizeFirst: normalise after the resize) gives torchvision's input (normalise,
+    then resize) up to float rounding, for images of other sizes than the test size, and the same image sizes."""
+    import copy
+
+    from sixdpose.segmentation.infer import _ResizeFirst
+    from sixdpose.segmentation.model import build_model
+
+    cfg = profile_config("smoke")
+    model, _ = build_model(cfg, 3)
+    model.eval()
+    fast = copy.deepcopy(model.transform)
+    fast.__class__ = _ResizeFirst
+    g = torch.Generator().manual_seed(2)
+    ims = [torch.rand(3, 120, 160, generator=g), torch.rand(3, 97, 211, generator=g)]
+    with torch.no_grad():
+        ref, _ = model.transform(ims)
+        got, _ = fast(ims)
+    assert got.image_sizes == ref.image_sizes and got.tensors.shape == ref.tensors.shape
+    assert torch.allclose(got.tensors, ref.tensors, atol=1e-5) and ref.tensors.abs().max() > 1.0
+
+
 def test_a_compiled_backbone_that_disagrees_is_not_used(monkeypatch, caplog):
     """When the compiled body's features differ from the eager ones, the eager body is kept, with a warning."""
     from sixdpose.segmentation.infer import optimise_backbone
