@@ -291,8 +291,8 @@ def test_compiled_backbone_gives_the_eager_detections_at_other_sizes(backbone):
 
 
 def test_inference_transform_normalises_after_resizing_with_the_same_network_input():
-    """The Segmenter's transform (_ResizeFirst: normalise after the resize) gives torchvision's input (normalise,
-    then resize) up to float rounding, for images of other sizes than the test size, and the same image sizes."""
+    """The Segmenter's transform (_ResizeFirst: normalise after a shrinking resize, before an enlarging one)
+    gives torchvision's input (normalise, then resize) up to float rounding, and the same image sizes."""
     import copy
 
     from sixdpose.segmentation.infer import _ResizeFirst
@@ -301,6 +301,7 @@ def test_inference_transform_normalises_after_resizing_with_the_same_network_inp
     cfg = profile_config("smoke")
     model, _ = build_model(cfg, 3)
     model.eval()
+    model.transform.min_size, model.transform.max_size = (100,), 1000  # 120x160 shrinks, 97x211 grows
     fast = copy.deepcopy(model.transform)
     fast.__class__ = _ResizeFirst
     g = torch.Generator().manual_seed(2)

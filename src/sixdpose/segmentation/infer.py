@@ -101,7 +101,7 @@ class Segmenter:
         self.device = pick_device(device)
         self.model = model.to(self.device).eval()
         set_train_sizes(self.model, cfg, training=False)
-        self.model.transform.__class__ = _ResizeFirst  # the same transform, normalising after the resize
+        self.model.transform.__class__ = _ResizeFirst  # the same transform, normalising the smaller image
         self._lut = classes.obj_id_array()
         self.optimised = False
         if optimise or (optimise is None and self.device.type == "cpu"):
@@ -142,16 +142,21 @@ class Segmenter:
 
 
 class _ResizeFirst(GeneralizedRCNNTransform):
-    """torchvision's detection transform with the normalisation after the resize instead of before: the
-    bilinear resize is a weighted mean of neighbouring pixels (weights summing to 1), so it commutes with the
-    per-channel affine normalisation (the same network input up to float rounding), and the normalisation
-    then runs over the resized image only (a quarter of a 640x480 frame's pixels at the ``cpu`` profile's
-    320 pixels). Inference only (:class:`Segmenter`): training keeps torchvision's order."""
+    """torchvision's detection transform normalising the smaller of the image before and after the resize:
+    the bilinear resize is a weighted mean of neighbouring pixels (weights summing to 1), so it commutes with
+    the per-channel affine normalisation (the same network input up to float rounding). At the ``cpu``
+    profile's 320 pixels the normalisation then runs over a third of a 640x480 frame's pixels, after the
+    resize; an image enlarged (the ``paper`` profile's 800) is normalised first, as torchvision does.
+    Inference only (:class:`Segmenter`): training keeps torchvision's transform."""
 
     def normalize(self, image: torch.Tensor) -> torch.Tensor:  # noqa: D102
-        return image
+        return image  # done in resize, before or after it
 
     def resize(self, image, target=None):  # noqa: D102
+        h, w = image.shape[-2:]
+        scale = min(float(self.min_size[-1]) / min(h, w), float(self.max_size) / max(h, w))
+        if self.training or self.fixed_size is not None or scale >= 1.0:
+            return super().resize(GeneralizedRCNNTransform.normalize(self, image), target)
         image, target = super().resize(image, target)
         return GeneralizedRCNNTransform.normalize(self, image), target
 
