@@ -28,6 +28,8 @@ Usage::
 * With ``--seg SEG_RUN --data DIR`` (trained runs): end-to-end FPS on the dataset's first ``--frames``
   real frames, loaded into memory first: Mask R-CNN on the RGB image, then the pose network and 2
   refinement iterations on every detection of the frame in one batch (section V-A: disk reads excluded).
+  The reported pass' two parts are given too (``e2e_seg_ms_per_frame``: Mask R-CNN and its detections;
+  ``e2e_pose_ms_per_frame``: the pose stage on them).
   Mask R-CNN keeps only the detections the pose stage uses (score >= ``MIN_DETECTION_SCORE``): the pose
   stage's poses are the same, and no mask is pasted for a detection it would drop. On the CPU the Segmenter
   runs its backbone compiled (:func:`sixdpose.segmentation.infer.optimise_backbone`: the same detections).
@@ -149,7 +151,12 @@ def median_pass(fn, items, device, repeats: int) -> tuple[list[float], list[floa
     fall in single passes) and every pass' mean, seconds."""
     passes = [timed(fn, items, device) for _ in range(max(int(repeats), 1))]
     means = [float(np.mean(p)) for p in passes]
-    return passes[int(np.argsort(means)[(len(means) - 1) // 2])], means
+    return passes[median_index(means)], means
+
+
+def median_index(means: list[float]) -> int:
+    """The index of the median of ``means`` (the lower middle for an even count), as :func:`median_pass` picks."""
+    return int(np.argsort(means)[(len(means) - 1) // 2])
 
 
 def spread(means: list[float], key: str) -> dict:
@@ -293,7 +300,9 @@ def untrained_seg(profile: str, pose, tmp: Path, backbone: str | None = None) ->
 def end_to_end_fps(seg, pose, refiner, data, device, frames: int, untrained: bool = False,
                    compile_seg: bool | None = None, repeats: int = 1, slides: dict | None = None,
                    amp: bool | None = None, seg_overrides: dict | None = None) -> dict:
-    """Frames per second of segmentation + pose + 2 refinement iterations on a dataset's first frames.
+    """Frames per second of segmentation + pose + 2 refinement iterations on a dataset's first frames, and the
+    two parts' milliseconds per frame (``e2e_seg_ms_per_frame``: Mask R-CNN and its detections;
+    ``e2e_pose_ms_per_frame``: the pose stage on them) in the reported pass.
 
     ``compile_seg``: the Segmenter's ``optimise`` (None: its default, compiled on the CPU). ``repeats``:
     timed passes over the frames; the median pass is reported (:func:`median_pass`). ``slides``: as
@@ -312,6 +321,18 @@ def end_to_end_fps(seg, pose, refiner, data, device, frames: int, untrained: boo
     # scores >= 0.5, as predict-pose; the reader for flips named by colour
     est = set_up(Estimator(pose, refiner, iterations=2 if refiner else 0, device=str(device), reader=reader),
                  slides, amp)
+    split: list[tuple[float, float]] = []  # (segmentation, pose stage) seconds of every call
+
+    def both(segment, pose):
+        """Run ``segment()``, then ``pose(its output)``, recording the two times (both return host arrays,
+        so a GPU has finished each part when its clock stops)."""
+        t0 = time.perf_counter()
+        out = segment()
+        t1 = time.perf_counter()
+        rows = pose(out)
+        split.append((t1 - t0, time.perf_counter() - t1))
+        return rows
+
     if untrained:  # one network per detection count, each returning exactly that many
         segms = {n: Segmenter(seg, device=str(device), score_thresh=0.0,
                               overrides={**(seg_overrides or {}), "detections_per_img": n},
@@ -319,24 +340,31 @@ def end_to_end_fps(seg, pose, refiner, data, device, frames: int, untrained: boo
                  for n in {max(len(s.instances), 1) for s in samples}}
 
         def run(sample):
-            out = segms[max(len(sample.instances), 1)].predict([sample.rgb])[0]
-            return est.predict(sample), len(out["labels"])
+            return both(lambda: segms[max(len(sample.instances), 1)].predict([sample.rgb])[0],
+                        lambda out: (est.predict(sample), len(out["labels"])))
     else:  # detections below the pose stage's score are dropped before their masks are pasted: the estimator
         # ignores them anyway, and a box kept by the score floor is never suppressed by a lower-scored one
         segm = Segmenter(seg, device=str(device), score_thresh=est.score_thresh, optimise=compile_seg,
                          overrides=seg_overrides)
 
+        def detections(out):
+            return [Detection(int(o), float(s), m)
+                    for o, s, m in zip(out["labels"], out["scores"], out["masks"], strict=True)]
+
         def run(sample):
-            out = segm.predict([sample.rgb])[0]
-            found = zip(out["labels"], out["scores"], out["masks"], strict=True)
-            dets = [Detection(int(o), float(s), m) for o, s, m in found]
-            return est.predict(sample, dets), len(dets)
+            return both(lambda: detections(segm.predict([sample.rgb])[0]),
+                        lambda dets: (est.predict(sample, dets), len(dets)))
 
     for s in samples:  # warm-up: first-call allocations and each object's onboarding, not timed
         run(s)
+    split.clear()
     n_det = []
     times, means = median_pass(lambda s: n_det.append(run(s)[1]), samples[1:], device, repeats)
+    n = len(times)
+    parts = np.asarray(split[median_index(means) * n:(median_index(means) + 1) * n])  # the reported pass'
     res = {"e2e_fps": 1.0 / float(np.mean(times)), "e2e_ms_per_frame": 1000 * float(np.mean(times)),
+           "e2e_seg_ms_per_frame": 1000 * float(parts[:, 0].mean()),
+           "e2e_pose_ms_per_frame": 1000 * float(parts[:, 1].mean()),
            "e2e_detections_per_frame": sum(n_det) / max(len(n_det), 1), "e2e_frames": len(times),
            **(spread(means, "e2e") if repeats > 1 else {})}
     if untrained:

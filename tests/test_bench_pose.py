@@ -39,8 +39,9 @@ def test_seg_profile_times_segmentation_and_pose_on_every_frame(tmp_path, capsys
 
 
 def test_repeats_report_the_median_pass_and_the_spread(tmp_path, capsys):
-    """--repeats N times N passes over the frames and reports the median pass with the slowest and fastest;
-    --repeats 0 is refused with exit status 2; median_pass picks the pass of median mean."""
+    """--repeats N times N passes over the frames and reports the median pass with the slowest and fastest, and
+    that pass' segmentation and pose-stage times; --repeats 0 is refused with exit status 2; median_pass picks
+    the pass of median mean."""
     bench = _bench()
     data = write_synthetic_dataset(tmp_path / "d", n_images=3)
     pose, _ = bench.fake_runs("smoke", tmp_path, classes=16, head="dense", appearance="local")
@@ -52,6 +53,9 @@ def test_repeats_report_the_median_pass_and_the_spread(tmp_path, capsys):
     assert fig["e2e_passes"] == fig["infer_passes"] == 3
     assert fig["e2e_fps_min"] <= fig["e2e_fps"] <= fig["e2e_fps_max"]
     assert fig["infer_fps_min"] <= fig["infer_fps"] <= fig["infer_fps_max"]
+    # the reported pass' two parts: Mask R-CNN and the pose stage, within the frame's time (the rest: the loop)
+    seg_ms, pose_ms = fig["e2e_seg_ms_per_frame"], fig["e2e_pose_ms_per_frame"]
+    assert seg_ms > 0 and pose_ms > 0 and 0.8 * fig["e2e_ms_per_frame"] <= seg_ms + pose_ms <= fig["e2e_ms_per_frame"]
     with pytest.raises(SystemExit) as e:
         bench.main(args[:-1] + ["0"])
     assert e.value.code == 2 and "--repeats" in capsys.readouterr().err
