@@ -79,6 +79,25 @@ def fake_pose_run(path: Path, cfg: PoseConfig, classes=((OID, "035_power_drill",
 
 
 # ---------------------------------------------------------------- blocks
+@pytest.mark.parametrize("colour", [False, True])
+def test_local_geometry_without_edge_tensors_is_the_edge_convolution(colour):
+    """LocalGeometry's edge convolutions computed per point and gathered (_edge_conv) give what the 1x1
+    convolutions over the built edge tensors [f_i, s (f_j - f_i)] (DGCNN's EdgeConv, _edges) give."""
+    from sixdpose.pose.model import LocalGeometry
+
+    torch.manual_seed(0)
+    m = LocalGeometry(32, width=0.5, norm="group", colour=colour).eval()
+    cloud, cols = torch.randn(3, 40, 3), torch.randn(3, 3, 40)
+    with torch.no_grad():
+        got = m(cloud, cols if colour else None)
+        x, idx = cloud.transpose(1, 2), torch.cdist(cloud, cloud).topk(16, dim=2, largest=False).indices
+        e = m._edges(x, idx, 5.0)
+        e = torch.cat([e, m._edges(cols, idx)], 1) if colour else e
+        f1 = m.edge1(e).max(dim=3).values
+        ref = m.out(torch.cat([f1, m.edge2(m._edges(f1, idx)).max(dim=3).values], 1))
+    assert got.shape == (3, 32, 40) and torch.allclose(got, ref, atol=1e-5) and ref.abs().max() > 0.5
+
+
 def test_heads_computed_without_repeating_the_global_feature_are_the_concatenated_ones():
     """PoseNet._head (the global feature's product once per instance) and the dense head's per-class output
     rows give what the DenseFusion formulation (the global feature repeated at every point, every class's

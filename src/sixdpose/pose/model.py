@@ -222,18 +222,41 @@ class LocalGeometry(nn.Module):
         fi = f[:, :, :, None].expand_as(nb)
         return torch.cat([fi, scale * (nb - fi)], dim=1)
 
+    @staticmethod
+    def _edge_conv(conv: nn.Module, parts: list[tuple[torch.Tensor, float]], idx: torch.Tensor) -> torch.Tensor:
+        """``conv(cat([_edges(f, idx, scale) for f, scale in parts]))`` without building the (N, 2C, P, k) edge
+        tensor: a 1x1 convolution is linear, so each part's ``W_i f_i + W_j scale (f_j - f_i)`` is
+        ``(W_i - scale W_j) f`` at point i plus ``scale W_j f`` gathered at its neighbour j: two products per
+        point, not per edge (the same function). parts: (N, C, P) features and their offset scales; idx: (N, P,
+        k) neighbour indices. Returns (N, out, P, k)."""
+        assert isinstance(conv, nn.Conv2d)
+        w, col = conv.weight[:, :, 0, 0], 0
+        heres, theres = [], []
+        for f, scale in parts:
+            c = f.shape[1]
+            wi, wj = w[:, col:col + c], w[:, col + c:col + 2 * c]
+            col += 2 * c
+            heres.append((wi - scale * wj) @ f)  # (N, out, P)
+            theres.append((scale * wj) @ f)
+        assert col == w.shape[1]
+        here, there = sum(heres[1:], heres[0]), sum(theres[1:], theres[0])
+        if conv.bias is not None:
+            here = here + conv.bias[:, None]
+        nb = there.transpose(1, 2)[torch.arange(len(idx), device=idx.device)[:, None, None], idx]  # (N, P, k, out)
+        return here[:, :, :, None] + nb.permute(0, 3, 1, 2)
+
     def forward(self, cloud: torch.Tensor, colours: torch.Tensor | None = None) -> torch.Tensor:  # noqa: D102
         x = cloud.transpose(1, 2)  # (N, 3, P)
         k = min(self.k, cloud.shape[1])
         idx = torch.cdist(cloud, cloud).topk(k, dim=2, largest=False).indices  # (N, P, k), self included
         # neighbour offsets are millimetres to centimetres: x5 brings them to the centred cloud's scale
-        e = self._edges(x, idx, 5.0)
+        parts = [(x, 5.0)]
         if self.colour:
             if colours is None:
                 raise ValueError("LocalGeometry(colour=True) needs the points' colours")
-            e = torch.cat([e, self._edges(colours, idx)], dim=1)
-        f1 = self.edge1(e).max(dim=3).values
-        f2 = self.edge2(self._edges(f1, idx)).max(dim=3).values
+            parts.append((colours, 1.0))
+        f1 = self.edge1[1:](self._edge_conv(self.edge1[0], parts, idx)).max(dim=3).values
+        f2 = self.edge2[1:](self._edge_conv(self.edge2[0], [(f1, 1.0)], idx)).max(dim=3).values
         return self.out(torch.cat([f1, f2], dim=1))
 
 
